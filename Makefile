@@ -1,0 +1,30 @@
+# physpose: `make demo` (install + run on the built-in clip), `make test` (install + tests).
+SHELL := /bin/bash
+UV := $(shell command -v uv 2>/dev/null || echo $(HOME)/.local/bin/uv)
+RUN := $(UV) run --frozen
+
+.PHONY: setup data demo test test-fast bench clean
+
+$(UV):
+	python3 -m pip install --user --quiet "uv>=0.5" || python3 -m pip install --quiet "uv>=0.5"
+
+setup: $(UV)
+	$(UV) sync --frozen
+	$(RUN) python -m physpose.demo_data
+
+data: setup
+
+demo: setup
+	$(RUN) physpose demo --out out/demo
+
+test: setup
+	$(RUN) pytest -q
+
+test-fast: setup
+	$(RUN) pytest -q -m "not slow"
+
+bench: setup
+	$(RUN) python benchmarks/run_all.py
+
+clean:
+	rm -rf out .cache

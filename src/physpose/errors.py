@@ -1,0 +1,29 @@
+"""One exception type for every problem a user can fix: it names the file, the problem and the remedy."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class PhysposeError(Exception):
+    """A user-facing error: the CLI prints it without a traceback and exits non-zero.
+
+    The message reads "<where>: <problem>. <remedy>" so a person knows which file (and frame)
+    is wrong and what to do about it.
+    """
+
+    def __init__(self, problem: str, *, path: str | Path | None = None, frame: int | None = None,
+                 remedy: str | None = None):
+        self.problem = problem
+        self.path = None if path is None else str(path)
+        self.frame = frame
+        self.remedy = remedy
+        where = []
+        if self.path is not None:
+            where.append(self.path)
+        if frame is not None:
+            where.append(f"frame {frame}")
+        text = (", ".join(where) + ": " if where else "") + problem.rstrip(".") + "."
+        if remedy:
+            text += " " + remedy.rstrip(".") + "."
+        super().__init__(text)

@@ -1,0 +1,148 @@
+"""`Observations`: the per-frame 2d/3d landmark evidence every later stage reads.
+
+Two ways in: the observe stage (video -> MediaPipe) and precomputed keypoints files
+(`physpose.keypoints_io`). Both produce this one type, stored as `observations.npz`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from physpose.errors import PhysposeError
+from physpose.joints import NUM_LANDMARKS
+
+FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True, eq=False)
+class Observations:
+    """Landmarks of one person over time, MediaPipe's 33-landmark order.
+
+    Frames where the person was not found (neither `detected` nor `interpolated`) hold zeros
+    with confidence 0, so confidence-weighted losses ignore them without NaN handling.
+    """
+
+    source: str                    # the video or keypoints file these came from
+    fps: float                     # rate of every per-frame array, Hz
+    image_size: tuple[int, int]    # (width, height), pixels
+    timestamps: np.ndarray         # (T,) seconds since the start of the source
+    keypoints2d: np.ndarray        # (T, 33, 3) x, y in pixels + confidence in [0, 1]
+    detected: np.ndarray           # (T,) bool, the detector found the person in this frame
+    interpolated: np.ndarray       # (T,) bool, values filled across a short detection gap
+    world_landmarks: np.ndarray | None = None  # (T, 33, 3) m, hip-centred, camera axes (OpenCV)
+    masks: np.ndarray | None = None            # (T, h, w) uint8 person probability x 255
+    camera_K: np.ndarray | None = None         # (3, 3) intrinsics, when the camera is calibrated
+    frame_indices: np.ndarray | None = None    # (T,) index of each frame in the source video
+
+    def __post_init__(self) -> None:
+        validate(self)
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.keypoints2d.shape[0])
+
+    @property
+    def valid(self) -> np.ndarray:
+        """(T,) bool: frames that carry landmarks (detected or interpolated)."""
+        return self.detected | self.interpolated
+
+    def replace(self, **changes) -> "Observations":
+        return dataclasses.replace(self, **changes)
+
+    def save(self, path: str | Path) -> Path:
+        """Write to an npz file (loadable with allow_pickle=False); returns the path."""
+        path = Path(path)
+        arrays = {
+            "format_version": np.array(FORMAT_VERSION),
+            "source": np.array(self.source),
+            "fps": np.array(float(self.fps)),
+            "image_size": np.array(self.image_size, dtype=np.int64),
+            "timestamps": self.timestamps,
+            "keypoints2d": self.keypoints2d,
+            "detected": self.detected,
+            "interpolated": self.interpolated,
+        }
+        for key in ("world_landmarks", "masks", "camera_K", "frame_indices"):
+            value = getattr(self, key)
+            if value is not None:
+                arrays[key] = value
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".partial.npz")
+        np.savez_compressed(tmp, **arrays)
+        tmp.replace(path)  # atomic: a crash never leaves a half-written file under the real name
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Observations":
+        path = Path(path)
+        if not path.is_file():
+            raise PhysposeError("observations file not found", path=path,
+                                remedy="run `physpose observe VIDEO --out DIR` first")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                d = {k: data[k] for k in data.files}
+        except (OSError, ValueError) as exc:
+            raise PhysposeError(f"not a readable observations npz ({exc})", path=path,
+                                remedy="re-create it with `physpose observe`") from None
+        missing = {"fps", "image_size", "timestamps", "keypoints2d", "detected",
+                   "interpolated"} - d.keys()
+        if missing:
+            raise PhysposeError(f"observations npz lacks keys {sorted(missing)}", path=path,
+                                remedy="re-create it with `physpose observe`")
+        return cls(
+            source=str(d.get("source", str(path))),
+            fps=float(d["fps"]),
+            image_size=tuple(int(v) for v in d["image_size"]),
+            timestamps=d["timestamps"],
+            keypoints2d=d["keypoints2d"],
+            detected=d["detected"].astype(bool),
+            interpolated=d["interpolated"].astype(bool),
+            world_landmarks=d.get("world_landmarks"),
+            masks=d.get("masks"),
+            camera_K=d.get("camera_K"),
+            frame_indices=d.get("frame_indices"),
+        )
+
+
+def validate(obs: Observations) -> None:
+    """Raise PhysposeError naming the source and frame if any array is malformed."""
+    src = obs.source
+
+    def fail(problem: str, frame: int | None = None) -> None:
+        raise PhysposeError(problem, path=src, frame=frame,
+                            remedy="check how the file was produced (see docs/keypoints_format.md)")
+
+    if not (np.isfinite(obs.fps) and 0.5 <= obs.fps <= 1000):
+        fail(f"frame rate {obs.fps} Hz is outside 0.5-1000 Hz")
+    if len(obs.image_size) != 2 or min(obs.image_size) <= 0:
+        fail(f"image size {obs.image_size} must be (width, height) in positive pixels")
+    kp = np.asarray(obs.keypoints2d)
+    if kp.ndim != 3 or kp.shape[1:] != (NUM_LANDMARKS, 3):
+        fail(f"keypoints2d has shape {kp.shape}, expected (T, {NUM_LANDMARKS}, 3)")
+    t = kp.shape[0]
+    if t == 0:
+        fail("no frames")
+    for name in ("timestamps", "detected", "interpolated"):
+        if np.asarray(getattr(obs, name)).shape != (t,):
+            fail(f"{name} has shape {np.asarray(getattr(obs, name)).shape}, expected ({t},)")
+    bad = ~np.isfinite(kp).all(axis=(1, 2))
+    if bad.any():
+        fail("keypoints2d contains NaN or infinite values", int(np.argmax(bad)))
+    conf = kp[..., 2]
+    if (conf < 0).any() or (conf > 1).any():
+        fail("keypoint confidences must lie in [0, 1]", int(np.argmax(((conf < 0) | (conf > 1)).any(1))))
+    if obs.world_landmarks is not None:
+        wl = np.asarray(obs.world_landmarks)
+        if wl.shape != (t, NUM_LANDMARKS, 3):
+            fail(f"world_landmarks has shape {wl.shape}, expected ({t}, {NUM_LANDMARKS}, 3)")
+        bad = ~np.isfinite(wl).all(axis=(1, 2))
+        if bad.any():
+            fail("world_landmarks contains NaN or infinite values", int(np.argmax(bad)))
+    if obs.masks is not None and (np.asarray(obs.masks).ndim != 3 or len(obs.masks) != t):
+        fail(f"masks has shape {np.asarray(obs.masks).shape}, expected ({t}, h, w)")
+    if obs.camera_K is not None and np.asarray(obs.camera_K).shape != (3, 3):
+        fail(f"camera_K has shape {np.asarray(obs.camera_K).shape}, expected (3, 3)")

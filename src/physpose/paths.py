@@ -1,0 +1,34 @@
+"""Where physpose finds its built-in data and the shared evaluation material."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+# The repository root when installed editable from a checkout (src/physpose/paths.py -> ../..).
+_CHECKOUT = Path(__file__).resolve().parents[2]
+
+
+def project_root() -> Path:
+    """The checkout root if physpose runs from one, else the working directory."""
+    return _CHECKOUT if (_CHECKOUT / "pyproject.toml").is_file() else Path.cwd()
+
+
+def data_dir() -> Path:
+    """Git-ignored folder for data the set-up fetches (override: PHYSPOSE_DATA_DIR)."""
+    return Path(os.environ.get("PHYSPOSE_DATA_DIR", project_root() / "data"))
+
+
+def cache_dir() -> Path:
+    """Stage cache folder (override: PHYSPOSE_CACHE_DIR)."""
+    return Path(os.environ.get("PHYSPOSE_CACHE_DIR", project_root() / ".cache" / "physpose"))
+
+
+def shared_data_dir() -> Path:
+    """The evaluation material beside the project (override: PHYSPOSE_SHARED_DATA)."""
+    return Path(os.environ.get("PHYSPOSE_SHARED_DATA", project_root().parent / "shared" / "data"))
+
+
+def pose2sim_demo_dir() -> Path:
+    """The pose2sim single-person demo (4 calibrated views), fetched by `make data`."""
+    return data_dir() / "pose2sim" / "Demo_SinglePerson"

@@ -1,0 +1,27 @@
+"""Shared fixtures: locations of the real evaluation material, skipped cleanly when absent."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from physpose.paths import pose2sim_demo_dir, shared_data_dir
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """../shared/data (real videos and mocap); skips the test when it is absent."""
+    root = shared_data_dir()
+    if not (root / "README.md").is_file():
+        pytest.skip(f"evaluation material not found at {root} (see ../shared/data/README.md)")
+    return root
+
+
+@pytest.fixture(scope="session")
+def pose2sim_demo() -> Path:
+    """The pose2sim demo fetched by `make setup`; skips when it was not fetched."""
+    root = pose2sim_demo_dir()
+    if not (root / "videos" / "cam01.mp4").is_file():
+        pytest.skip(f"pose2sim demo not found at {root}; run `make data`")
+    return root

@@ -1,0 +1,55 @@
+import numpy as np
+import pytest
+
+from physpose.errors import PhysposeError
+from physpose.joints import JOINT_NAMES, NUM_LANDMARKS, joints_from_landmarks
+from physpose.observations import Observations
+
+
+def _obs(t: int = 4, **changes) -> Observations:
+    rng = np.random.default_rng(0)
+    kp = np.concatenate([rng.uniform(0, 100, (t, NUM_LANDMARKS, 2)),
+                         rng.uniform(0, 1, (t, NUM_LANDMARKS, 1))], axis=-1)
+    fields = dict(source="clip.mp4", fps=25.0, image_size=(640, 480),
+                  timestamps=np.arange(t) / 25.0, keypoints2d=kp,
+                  detected=np.ones(t, bool), interpolated=np.zeros(t, bool),
+                  world_landmarks=rng.normal(size=(t, NUM_LANDMARKS, 3)))
+    fields.update(changes)
+    return Observations(**fields)
+
+
+def test_save_load_roundtrip(tmp_path):
+    obs = _obs()
+    back = Observations.load(obs.save(tmp_path / "o.npz"))
+    np.testing.assert_array_equal(back.keypoints2d, obs.keypoints2d)
+    np.testing.assert_array_equal(back.world_landmarks, obs.world_landmarks)
+    assert back.image_size == (640, 480) and back.fps == 25.0 and back.masks is None
+
+
+def test_nan_keypoints_name_file_and_frame():
+    kp = _obs().keypoints2d.copy()
+    kp[2, 5, 0] = np.nan
+    with pytest.raises(PhysposeError, match=r"clip\.mp4, frame 2: keypoints2d contains NaN"):
+        _obs(keypoints2d=kp)
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(fps=0.0), "frame rate"),
+    (dict(keypoints2d=np.zeros((4, 17, 3))), "expected"),
+    (dict(detected=np.ones(3, bool)), "detected has shape"),
+])
+def test_malformed_fields_are_rejected(change, message):
+    with pytest.raises(PhysposeError, match=message):
+        _obs(**change)
+
+
+def test_load_missing_file_gives_remedy(tmp_path):
+    with pytest.raises(PhysposeError, match="physpose observe"):
+        Observations.load(tmp_path / "nope.npz")
+
+
+def test_joint_proxies_from_landmarks():
+    lm = np.arange(NUM_LANDMARKS * 3, dtype=float).reshape(NUM_LANDMARKS, 3)
+    joints = joints_from_landmarks(lm)
+    assert joints.shape == (len(JOINT_NAMES), 3)
+    np.testing.assert_allclose(joints[0], 0.5 * (lm[23] + lm[24]))  # pelvis = mid-hips
