@@ -53,3 +53,17 @@ def test_joint_proxies_from_landmarks():
     joints = joints_from_landmarks(lm)
     assert joints.shape == (len(JOINT_NAMES), 3)
     np.testing.assert_allclose(joints[0], 0.5 * (lm[23] + lm[24]))  # pelvis = mid-hips
+
+
+def test_reconstruction_roundtrip(tmp_path):
+    from physpose.reconstruction import Reconstruction
+
+    t = 3
+    rec = Reconstruction(fps=25.0, joint_names=JOINT_NAMES,
+                         joints_kinematic=np.zeros((t, len(JOINT_NAMES), 3)),
+                         camera_K=np.eye(3), camera_T_world2cam=np.eye(4),
+                         landmarks_kinematic=np.zeros((t, NUM_LANDMARKS, 3)),
+                         keypoints2d=np.zeros((t, NUM_LANDMARKS, 3)), meta={"variant": "SO+GT"})
+    back = Reconstruction.load(rec.save(tmp_path / "reconstruction.npz").parent)
+    assert back.joint_names == JOINT_NAMES and back.meta == {"variant": "SO+GT"}
+    assert not back.has_physics and back.joints().shape == (t, len(JOINT_NAMES), 3)

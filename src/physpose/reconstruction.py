@@ -1,0 +1,122 @@
+"""`Reconstruction`: the `reconstruction.npz` contract that benchmarks, exporters and tools read.
+
+See ../shared/DESIGN.md ("Contract"). Kinematic-only results leave the physics fields None.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from physpose.errors import PhysposeError
+from physpose.joints import JOINT_NAMES, NUM_LANDMARKS
+
+_REQUIRED = ("fps", "joint_names", "joints_kinematic", "camera_K", "camera_T_world2cam",
+             "landmarks_kinematic", "keypoints2d")
+_OPTIONAL = ("joints_physics", "qpos_physics", "landmarks_physics", "body_mjcf")
+
+
+@dataclass(frozen=True, eq=False)
+class Reconstruction:
+    """World-frame motion (z up, ground z = 0, metres) at the analysis frame rate."""
+
+    fps: float
+    joint_names: tuple[str, ...]
+    joints_kinematic: np.ndarray        # (T, J, 3) kinematic estimate
+    camera_K: np.ndarray                # (3, 3)
+    camera_T_world2cam: np.ndarray      # (4, 4), OpenCV camera axes
+    landmarks_kinematic: np.ndarray     # (T, 33, 3) world positions of the landmark sites
+    keypoints2d: np.ndarray             # (T, 33, 3) detections used: pixels + confidence
+    joints_physics: np.ndarray | None = None     # (T, J, 3) simulated motion at the frames
+    qpos_physics: np.ndarray | None = None       # (T, nq) simulator coordinates at the frames
+    landmarks_physics: np.ndarray | None = None  # (T, 33, 3)
+    body_mjcf: str | None = None                 # MJCF of the body and scene
+    meta: dict = dataclasses.field(default_factory=dict)  # JSON-able extras (config, timings)
+
+    def __post_init__(self) -> None:
+        t = self.joints_kinematic.shape[0]
+        j = len(self.joint_names)
+        checks = {
+            "joints_kinematic": (t, j, 3), "landmarks_kinematic": (t, NUM_LANDMARKS, 3),
+            "keypoints2d": (t, NUM_LANDMARKS, 3), "camera_K": (3, 3),
+            "camera_T_world2cam": (4, 4), "joints_physics": (t, j, 3),
+            "landmarks_physics": (t, NUM_LANDMARKS, 3),
+        }
+        for key, shape in checks.items():
+            value = getattr(self, key)
+            if value is not None and np.shape(value) != shape:
+                raise PhysposeError(f"reconstruction field {key} has shape {np.shape(value)}, "
+                                    f"expected {shape}")
+        if self.qpos_physics is not None and np.shape(self.qpos_physics)[0] != t:
+            raise PhysposeError(f"qpos_physics has {np.shape(self.qpos_physics)[0]} frames, "
+                                f"expected {t}")
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.joints_kinematic.shape[0])
+
+    @property
+    def has_physics(self) -> bool:
+        return self.joints_physics is not None
+
+    def joints(self, which: str = "best") -> np.ndarray:
+        """(T, J, 3) physics joints if present (or which='physics'), else kinematic."""
+        if which == "kinematic" or (which == "best" and not self.has_physics):
+            return self.joints_kinematic
+        if self.joints_physics is None:
+            raise PhysposeError("this reconstruction has no physics result",
+                                remedy="run `physpose reconstruct` instead of `physpose fit`")
+        return self.joints_physics
+
+    def replace(self, **changes) -> "Reconstruction":
+        return dataclasses.replace(self, **changes)
+
+    def save(self, path: str | Path) -> Path:
+        path = Path(path)
+        arrays = {key: getattr(self, key) for key in _REQUIRED + _OPTIONAL
+                  if getattr(self, key) is not None}
+        arrays["fps"] = np.array(float(self.fps))
+        arrays["joint_names"] = np.array(self.joint_names)
+        if self.body_mjcf is not None:
+            arrays["body_mjcf"] = np.array(self.body_mjcf)
+        arrays["meta_json"] = np.array(json.dumps(self.meta, default=str))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + ".partial.npz")
+        np.savez_compressed(tmp, **arrays)
+        tmp.replace(path)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Reconstruction":
+        path = Path(path)
+        if path.is_dir():
+            path = path / "reconstruction.npz"
+        if not path.is_file():
+            raise PhysposeError("reconstruction not found", path=path,
+                                remedy="pass a folder written by `physpose fit` or "
+                                       "`physpose reconstruct`")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                d = {k: data[k] for k in data.files}
+        except (OSError, ValueError) as exc:
+            raise PhysposeError(f"not a readable reconstruction npz ({exc})", path=path,
+                                remedy="re-run the reconstruction") from None
+        missing = [k for k in _REQUIRED if k not in d]
+        if missing:
+            raise PhysposeError(f"reconstruction lacks keys {missing}", path=path,
+                                remedy="re-run the reconstruction with this physpose version")
+        fields = {k: d[k] for k in _REQUIRED + _OPTIONAL if k in d}
+        fields["fps"] = float(fields["fps"])
+        fields["joint_names"] = tuple(str(n) for n in fields["joint_names"])
+        if "body_mjcf" in fields:
+            fields["body_mjcf"] = str(fields["body_mjcf"])
+        meta = json.loads(str(d["meta_json"])) if "meta_json" in d else {}
+        return cls(meta=meta, **fields)
+
+
+def default_joint_names() -> tuple[str, ...]:
+    return JOINT_NAMES
