@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 
 from physpose.errors import PhysposeError
-from physpose.joints import JOINT_NAMES, NUM_LANDMARKS
+from physpose.joints import NUM_LANDMARKS
 
 _REQUIRED = ("fps", "joint_names", "joints_kinematic", "camera_K", "camera_T_world2cam",
              "landmarks_kinematic", "keypoints2d")
-_OPTIONAL = ("joints_physics", "qpos_physics", "landmarks_physics", "body_mjcf")
+_OPTIONAL = ("joints_physics", "qpos_physics", "landmarks_physics", "body_mjcf", "qpos_kinematic")
 
 
 @dataclass(frozen=True, eq=False)
@@ -35,6 +35,7 @@ class Reconstruction:
     qpos_physics: np.ndarray | None = None       # (T, nq) simulator coordinates at the frames
     landmarks_physics: np.ndarray | None = None  # (T, 33, 3)
     body_mjcf: str | None = None                 # MJCF of the body and scene
+    qpos_kinematic: np.ndarray | None = None     # (T, nq) the kinematic estimate in the same model
     meta: dict = dataclasses.field(default_factory=dict)  # JSON-able extras (config, timings)
 
     def __post_init__(self) -> None:
@@ -51,9 +52,10 @@ class Reconstruction:
             if value is not None and np.shape(value) != shape:
                 raise PhysposeError(f"reconstruction field {key} has shape {np.shape(value)}, "
                                     f"expected {shape}")
-        if self.qpos_physics is not None and np.shape(self.qpos_physics)[0] != t:
-            raise PhysposeError(f"qpos_physics has {np.shape(self.qpos_physics)[0]} frames, "
-                                f"expected {t}")
+        for key in ("qpos_physics", "qpos_kinematic"):
+            value = getattr(self, key)
+            if value is not None and np.shape(value)[0] != t:
+                raise PhysposeError(f"{key} has {np.shape(value)[0]} frames, expected {t}")
 
     @property
     def num_frames(self) -> int:
@@ -116,7 +118,3 @@ class Reconstruction:
             fields["body_mjcf"] = str(fields["body_mjcf"])
         meta = json.loads(str(d["meta_json"])) if "meta_json" in d else {}
         return cls(meta=meta, **fields)
-
-
-def default_joint_names() -> tuple[str, ...]:
-    return JOINT_NAMES
