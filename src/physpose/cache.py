@@ -1,0 +1,146 @@
+"""Stage cache: results stored as npz files keyed by what produced them, not by file existence.
+
+A key is the sha256 of (stage name, stage code version, sha256 of each input file's bytes, the
+stage config as sorted JSON, any extra JSON-able values). Change any of these and the key
+changes, so a stale result is never returned. Usage:
+
+    key = stage_key("observe", version=OBSERVE_VERSION, files=[video], config=cfg)
+    cache = Cache("observe")
+    arrays = cache.get(key)            # dict of arrays, or None on a miss
+    if arrays is None:
+        arrays = compute(...)
+        cache.put(key, arrays)         # atomic: temp file + rename
+
+Entries live in `paths.cache_dir()/<stage>/<key>.npz` (PHYSPOSE_CACHE_DIR overrides the root).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import logging
+import os
+import tempfile
+import zipfile
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physpose.errors import PhysposeError
+from physpose.paths import cache_dir
+
+CACHE_FORMAT = 1  # bump if the key recipe or the entry layout changes
+_CHUNK = 1 << 20  # bytes read at a time when hashing files
+_log = logging.getLogger(__name__)
+# (resolved path, size, mtime_ns) -> sha256 hex, so a file is hashed once per process.
+_digests: dict[tuple[str, int, int], str] = {}
+
+
+def file_digest(path: str | Path) -> str:
+    """sha256 hex digest of a file's bytes, streamed; memoised on (path, size, mtime)."""
+    path = Path(path)
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        raise PhysposeError("file not found", path=path, remedy="check the path") from None
+    memo = (str(path.resolve()), st.st_size, st.st_mtime_ns)
+    if memo not in _digests:
+        h = hashlib.sha256()
+        with path.open("rb") as fh:
+            while chunk := fh.read(_CHUNK):
+                h.update(chunk)
+        _digests[memo] = h.hexdigest()
+    return _digests[memo]
+
+
+def _jsonable(value: Any) -> Any:
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: _jsonable(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    if isinstance(value, Mapping):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return {"dtype": str(value.dtype), "shape": list(value.shape),
+                "sha256": hashlib.sha256(np.ascontiguousarray(value).tobytes()).hexdigest()}
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    raise TypeError(f"cannot put a {type(value).__name__} into a cache key")
+
+
+def canonical_json(value: Any) -> str:
+    """Deterministic JSON of a config (dataclass, mapping, sequence, array or scalar)."""
+    return json.dumps(_jsonable(value), sort_keys=True, separators=(",", ":"), allow_nan=True)
+
+
+def stage_key(stage: str, *, version: str | int, files: Iterable[str | Path] = (),
+              config: Any = None, extra: Any = None) -> str:
+    """Key (64 hex chars) of a stage result from its inputs' bytes, config and code version."""
+    recipe = {
+        "cache_format": CACHE_FORMAT,
+        "stage": stage,
+        "version": version,
+        "files": [file_digest(f) for f in files],
+        "config": _jsonable(config),
+        "extra": _jsonable(extra),
+    }
+    return hashlib.sha256(canonical_json(recipe).encode()).hexdigest()
+
+
+class Cache:
+    """The npz entries of one stage under `root/<stage>/` (root: paths.cache_dir())."""
+
+    def __init__(self, stage: str, root: str | Path | None = None):
+        if not stage or any(c in stage for c in "/\\") or stage.startswith("."):
+            raise ValueError(f"invalid stage name {stage!r}")
+        self.stage = stage
+        self.dir = Path(root if root is not None else cache_dir()) / stage
+
+    def path(self, key: str) -> Path:
+        """Where the entry for `key` is (or would be) stored."""
+        if len(key) < 16 or not all(c in "0123456789abcdef" for c in key):
+            raise ValueError(f"invalid cache key {key!r}")
+        return self.dir / f"{key}.npz"
+
+    def get(self, key: str) -> dict[str, np.ndarray] | None:
+        """The arrays stored under `key`, or None if absent. An unreadable entry (e.g. a
+        disk-full leftover) is logged, deleted and reported as a miss."""
+        path = self.path(key)
+        if not path.is_file():
+            return None
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                return {k: data[k] for k in data.files}
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            _log.warning("dropping unreadable cache entry %s (%s)", path, exc)
+            path.unlink(missing_ok=True)
+            return None
+
+    def put(self, key: str, arrays: Mapping[str, np.ndarray]) -> Path:
+        """Store arrays under `key` atomically (temp file in the same folder, then rename)."""
+        path = self.path(key)
+        self.dir.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=self.dir, prefix=f".{key[:16]}.", suffix=".tmp")
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                np.savez_compressed(fh, **{k: np.asarray(v) for k, v in arrays.items()})
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+        return path
+
+    def clear(self) -> int:
+        """Delete every entry of this stage; returns how many were removed."""
+        removed = 0
+        for p in self.dir.glob("*.npz"):
+            p.unlink(missing_ok=True)
+            removed += 1
+        return removed

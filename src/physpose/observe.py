@@ -1,0 +1,242 @@
+"""The observe stage: video -> per-frame MediaPipe Pose landmarks, world landmarks and masks.
+
+MediaPipe Pose (legacy `mp.solutions.pose`, model_complexity=1, video mode, landmark smoothing
+on) runs on frames resampled to `ObserveConfig.target_fps`. Per frame it keeps the 33 image
+landmarks (pixels + visibility), the 33 world landmarks and a downsampled person mask.
+
+World landmarks: MediaPipe gives metres with the origin midway between the hips and the axes of
+the camera image: x to the right of the image, y down the image, z away from the camera, a
+right-handed frame, i.e. OpenCV camera axes without the translation. (Checked on the pose2sim
+clip by tests/test_observe.py: world x/y grow with image x/y, and the nose lies in front of the
+chest under the right-handed cross product.)
+
+Frames without a detection are flagged; gaps of at most `max_gap_frames` between two detected
+frames are filled by linear interpolation and flagged `interpolated`. Results are cached
+(`physpose.cache`) by the video's bytes, the config and OBSERVE_VERSION.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from tqdm import tqdm
+
+from physpose import video as videolib
+from physpose.cache import Cache, stage_key
+from physpose.errors import PhysposeError
+from physpose.joints import NUM_LANDMARKS
+from physpose.observations import Observations
+
+OBSERVE_VERSION = 1  # bump when a change alters what observe() returns for the same input
+_log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ObserveConfig:
+    """Settings of the observe stage (all but use_cache are part of the cache key)."""
+
+    target_fps: float = 25.0               # Hz; capped at the video's own rate (paper: 25)
+    model_complexity: int = 1              # MediaPipe model; only 1 ships in the wheel (offline)
+    min_detection_confidence: float = 0.5  # person detector threshold, [0, 1]
+    min_tracking_confidence: float = 0.5   # below this the tracker re-detects, [0, 1]
+    mask_long_side: int = 256              # px, longer side of the stored mask; 0 = no masks
+    max_gap_frames: int = 5                # longest gap filled by interpolation (5 = 0.2 s at 25 Hz)
+    min_detection_fraction: float = 0.5    # fail if the person is found in fewer frames than this
+    start: float | None = None             # s, first time analysed (None: start of the video)
+    end: float | None = None               # s, analysis stops before this (None: end of video)
+    use_cache: bool = True                 # reuse a cached result for the same input and settings
+
+    def __post_init__(self) -> None:
+        def bad(problem: str, remedy: str) -> None:
+            raise PhysposeError(f"observe config: {problem}", remedy=remedy)
+
+        if self.model_complexity != 1:
+            bad(f"model_complexity={self.model_complexity} is not available offline",
+                "use model_complexity=1 (mediapipe 0.10.21 ships only that model)")
+        for name in ("min_detection_confidence", "min_tracking_confidence",
+                     "min_detection_fraction"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and 0 <= value <= 1):
+                bad(f"{name}={value} is outside [0, 1]", f"set {name} between 0 and 1")
+        if self.mask_long_side < 0 or self.max_gap_frames < 0:
+            bad("mask_long_side and max_gap_frames must be >= 0", "use non-negative integers")
+
+
+@dataclass(frozen=True)
+class FrameDetection:
+    """MediaPipe's answer for one frame where it found the person."""
+
+    keypoints2d: np.ndarray        # (33, 3) x, y pixels + visibility in [0, 1]
+    world_landmarks: np.ndarray    # (33, 3) m, hip-centred, camera axes
+    mask: np.ndarray | None        # (h, w) uint8 person probability x 255, downsampled
+
+
+class PoseDetector:
+    """MediaPipe Pose in video mode for one sequence of frames; use as a context manager.
+
+    Frames must be passed in time order (the legacy API stamps them itself, 33.3 ms apart; the
+    stamps only drive landmark smoothing).
+    """
+
+    def __init__(self, cfg: ObserveConfig):
+        import mediapipe as mp  # imported here: loading it costs ~1 s
+
+        self.mask_long_side = cfg.mask_long_side
+        self._pose = mp.solutions.pose.Pose(
+            static_image_mode=False, model_complexity=cfg.model_complexity,
+            smooth_landmarks=True, enable_segmentation=cfg.mask_long_side > 0,
+            smooth_segmentation=True, min_detection_confidence=cfg.min_detection_confidence,
+            min_tracking_confidence=cfg.min_tracking_confidence)
+
+    def __enter__(self) -> "PoseDetector":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._pose.close()
+
+    def detect(self, image_bgr: np.ndarray) -> FrameDetection | None:
+        """Landmarks of the most prominent person in a BGR image (H, W, 3), or None."""
+        height, width = image_bgr.shape[:2]
+        rgb = cv2.cvtColor(image_bgr, cv2.COLOR_BGR2RGB)
+        rgb.flags.writeable = False
+        result = self._pose.process(rgb)
+        if result.pose_landmarks is None or result.pose_world_landmarks is None:
+            return None
+        lm = np.array([(p.x * width, p.y * height, p.visibility)
+                       for p in result.pose_landmarks.landmark], dtype=np.float64)
+        lm[:, 2] = np.clip(lm[:, 2], 0.0, 1.0)
+        world = np.array([(p.x, p.y, p.z) for p in result.pose_world_landmarks.landmark],
+                         dtype=np.float64)
+        mask = None
+        if self.mask_long_side > 0 and result.segmentation_mask is not None:
+            mask = downsample_mask(result.segmentation_mask, self.mask_long_side)
+        return FrameDetection(keypoints2d=lm, world_landmarks=world, mask=mask)
+
+
+def mask_shape(image_size: tuple[int, int], long_side: int) -> tuple[int, int]:
+    """(h, w) of a mask whose longer side is `long_side` px, for an image of (width, height)."""
+    width, height = image_size
+    scale = min(1.0, long_side / max(width, height))
+    return max(1, round(height * scale)), max(1, round(width * scale))
+
+
+def downsample_mask(prob: np.ndarray, long_side: int) -> np.ndarray:
+    """Person probability (H, W) float in [0, 1] -> (h, w) uint8, area-averaged."""
+    h, w = mask_shape((prob.shape[1], prob.shape[0]), long_side)
+    small = cv2.resize(prob.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA)
+    return np.round(np.clip(small, 0.0, 1.0) * 255).astype(np.uint8)
+
+
+def fill_gaps(values: np.ndarray, detected: np.ndarray, max_gap: int) -> tuple[np.ndarray, np.ndarray]:
+    """Linearly interpolate runs of at most `max_gap` undetected frames between detected ones.
+
+    values: (T, ...) per-frame arrays; detected: (T,) bool.
+    Returns (filled copy of values, (T,) bool of the frames that were filled). Gaps at either end,
+    and longer gaps, are left untouched.
+    """
+    detected = np.asarray(detected, dtype=bool)
+    filled = np.array(values, copy=True)
+    interpolated = np.zeros_like(detected)
+    hits = np.flatnonzero(detected)
+    for a, b in zip(hits[:-1], hits[1:]):
+        gap = b - a - 1
+        if 0 < gap <= max_gap:
+            w = (np.arange(1, gap + 1) / (gap + 1)).reshape((-1,) + (1,) * (filled.ndim - 1))
+            blend = (1 - w) * values[a].astype(np.float64) + w * values[b].astype(np.float64)
+            filled[a + 1:b] = np.round(blend) if filled.dtype.kind in "iu" else blend
+            interpolated[a + 1:b] = True
+    return filled, interpolated
+
+
+def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
+            progress: bool = True) -> Observations:
+    """Run MediaPipe Pose on a video and return its Observations (cached by input + settings).
+
+    Raises PhysposeError for unreadable videos, bad time ranges or rates, and when the person is
+    found in fewer than `cfg.min_detection_fraction` of the frames.
+    """
+    video = Path(video)
+    info = videolib.probe(video)
+    plan = videolib.plan_frames(info, cfg.target_fps, cfg.start, cfg.end)
+    if plan.note:
+        _log.warning("%s: %s", video, plan.note)
+    cache = Cache("observe")
+    key = stage_key("observe", version=OBSERVE_VERSION, files=[video],
+                    config=dataclasses.replace(cfg, use_cache=True))
+    if cfg.use_cache and (hit := cache.get(key)) is not None:
+        return _from_arrays(hit, source=str(video))
+    obs = _detect_all(info, plan, cfg, progress)
+    if cfg.use_cache:
+        cache.put(key, _to_arrays(obs))
+    return obs
+
+
+def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig,
+                progress: bool) -> Observations:
+    t = len(plan.indices)
+    kp = np.zeros((t, NUM_LANDMARKS, 3))
+    world = np.zeros((t, NUM_LANDMARKS, 3))
+    mh, mw = mask_shape(info.image_size, cfg.mask_long_side)
+    masks = np.zeros((t, mh, mw), np.uint8) if cfg.mask_long_side > 0 else None
+    detected = np.zeros(t, bool)
+    read = 0
+    bar = tqdm(total=t, unit="frame", desc=f"observe {info.path.name}", disable=not progress,
+               leave=False)
+    with bar, PoseDetector(cfg) as detector:
+        for i, (_, image) in enumerate(videolib.read_frames(info, plan.indices)):
+            read = i + 1
+            bar.update()
+            found = detector.detect(image)
+            if found is None:
+                continue
+            detected[i] = True
+            kp[i], world[i] = found.keypoints2d, found.world_landmarks
+            if masks is not None and found.mask is not None:
+                masks[i] = found.mask
+    if read < t:  # the file ended a little early (within the container's counting slack)
+        kp, world, detected = kp[:read], world[:read], detected[:read]
+        masks = None if masks is None else masks[:read]
+    _check_detection_rate(info.path, int(detected.sum()), read, cfg)
+    kp, interpolated = fill_gaps(kp, detected, cfg.max_gap_frames)
+    world, _ = fill_gaps(world, detected, cfg.max_gap_frames)
+    if masks is not None:
+        masks, _ = fill_gaps(masks, detected, cfg.max_gap_frames)
+    return Observations(
+        source=str(info.path), fps=plan.fps, image_size=info.image_size,
+        timestamps=plan.timestamps[:read].astype(np.float64), keypoints2d=kp, detected=detected,
+        interpolated=interpolated, world_landmarks=world, masks=masks,
+        frame_indices=plan.indices[:read].astype(np.int64))
+
+
+def _check_detection_rate(path: Path, found: int, total: int, cfg: ObserveConfig) -> None:
+    if total == 0:
+        raise PhysposeError("no frames could be decoded", path=path,
+                            remedy="check the file plays in a video player; re-encode it")
+    if found == 0 or found < cfg.min_detection_fraction * total:
+        raise PhysposeError(
+            f"a person was found in only {found} of {total} frames "
+            f"({100 * found / total:.0f}%, need {100 * cfg.min_detection_fraction:.0f}%)",
+            path=path,
+            remedy="use a video where one person is fully visible and reasonably large, pick "
+                   "a time range with --start/--end where they are, or lower "
+                   "min_detection_confidence")
+
+
+def _to_arrays(obs: Observations) -> dict[str, np.ndarray]:
+    arrays = {f.name: getattr(obs, f.name) for f in dataclasses.fields(obs)}
+    return {k: np.asarray(v) for k, v in arrays.items() if v is not None and k != "source"}
+
+
+def _from_arrays(arrays: dict[str, np.ndarray], source: str) -> Observations:
+    d = dict(arrays)
+    return Observations(source=source, fps=float(d.pop("fps")),
+                        image_size=tuple(int(v) for v in d.pop("image_size")), **d)
