@@ -21,9 +21,10 @@ import hashlib
 import json
 import logging
 import os
-import tempfile
+import secrets
 import zipfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +38,22 @@ _CHUNK = 1 << 20  # bytes read at a time when hashing files
 _log = logging.getLogger(__name__)
 # (resolved path, size, mtime_ns) -> sha256 hex, so a file is hashed once per process.
 _digests: dict[tuple[str, int, int], str] = {}
+
+
+@contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temporary path beside `path`; on success rename it to `path`, else delete it.
+
+    Readers never see a half-written file, and a failure leaves an existing `path` untouched.
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.{secrets.token_hex(4)}.tmp{path.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def file_digest(path: str | Path) -> str:
@@ -126,15 +143,8 @@ class Cache:
     def put(self, key: str, arrays: Mapping[str, np.ndarray]) -> Path:
         """Store arrays under `key` atomically (temp file in the same folder, then rename)."""
         path = self.path(key)
-        self.dir.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=self.dir, prefix=f".{key[:16]}.", suffix=".tmp")
-        try:
-            with os.fdopen(fd, "wb") as fh:
-                np.savez_compressed(fh, **{k: np.asarray(v) for k, v in arrays.items()})
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        with atomic_path(path) as tmp, tmp.open("wb") as fh:
+            np.savez_compressed(fh, **{k: np.asarray(v) for k, v in arrays.items()})
         return path
 
     def clear(self) -> int:

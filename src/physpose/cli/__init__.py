@@ -13,6 +13,8 @@ from physpose.errors import PhysposeError
 # parser and sets `func(args) -> int` as the handler.
 SUBCOMMANDS: tuple[str, ...] = (
     "data",
+    "observe",
+    "demo",
 )
 
 

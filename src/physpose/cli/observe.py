@@ -1,0 +1,114 @@
+"""`physpose observe`: video (or precomputed keypoints) -> observations.npz + overlay video."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from physpose import __version__
+from physpose.errors import PhysposeError
+from physpose.keypoints_io import is_keypoints_file, load_keypoints
+from physpose.observations import Observations
+from physpose.observe import ObserveConfig, observe
+from physpose.overlay2d import write_overlay
+
+OBSERVATIONS_FILE = "observations.npz"
+OVERLAY_FILE = "overlay_landmarks.mp4"
+CONFIG_FILE = "config.json"
+
+
+@dataclass(frozen=True)
+class ObserveRun:
+    """What one run of the observe step produced."""
+
+    observations: Observations
+    files: tuple[Path, ...]   # the files written into the output folder
+    seconds: float            # wall time of the run
+
+    def summary(self) -> str:
+        obs = self.observations
+        n, found, filled = obs.num_frames, int(obs.detected.sum()), int(obs.interpolated.sum())
+        return (f"{Path(obs.source).name}: {n} frames at {obs.fps:g} fps, person found in "
+                f"{found}/{n} ({100 * found / n:.1f}%), {filled} interpolated, "
+                f"{self.seconds:.1f} s\n" + "".join(f"  wrote {p}\n" for p in self.files))
+
+
+def run_observe(source: str | Path, out_dir: str | Path, cfg: ObserveConfig = ObserveConfig(),
+                *, overlay: bool = True, progress: bool = True) -> ObserveRun:
+    """Observe a video (or load a .json/.npz keypoints file) and write the results to out_dir.
+
+    Files are written into a temporary folder inside out_dir and moved into place only when
+    all succeeded, so a failure never destroys earlier outputs.
+    """
+    start = time.perf_counter()
+    source, out_dir = Path(source), Path(out_dir)
+    keypoints = is_keypoints_file(source)
+    if keypoints and cfg != dataclasses.replace(ObserveConfig(), use_cache=cfg.use_cache):
+        raise PhysposeError("--fps/--start/--end apply to videos, not to precomputed keypoints",
+                            path=source, remedy="drop those options, or resample the keypoints "
+                                                "before writing them")
+    obs = load_keypoints(source) if keypoints else observe(source, cfg, progress=progress)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise PhysposeError("output path exists and is not a folder", path=out_dir,
+                            remedy="pass a folder for --out")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=".observe-"))
+    try:
+        names = [OBSERVATIONS_FILE, CONFIG_FILE]
+        obs.save(tmp / OBSERVATIONS_FILE)
+        if overlay:
+            write_overlay(obs, tmp / OVERLAY_FILE, None if keypoints else source,
+                          progress=progress)
+            names.append(OVERLAY_FILE)
+        resolved = {
+            "stage": "observe", "physpose_version": __version__,
+            "input": str(source.resolve()), "input_kind": "keypoints" if keypoints else "video",
+            "observe": None if keypoints else dataclasses.asdict(cfg),
+            "frames": obs.num_frames, "fps": obs.fps, "image_size": list(obs.image_size),
+        }
+        (tmp / CONFIG_FILE).write_text(json.dumps(resolved, indent=2) + "\n")
+        for name in names:
+            os.replace(tmp / name, out_dir / name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    files = tuple(out_dir / name for name in names)
+    return ObserveRun(observations=obs, files=files, seconds=time.perf_counter() - start)
+
+
+def config_from_args(args: argparse.Namespace) -> ObserveConfig:
+    """ObserveConfig from the shared --fps/--start/--end/--no-cache options."""
+    return ObserveConfig(target_fps=ObserveConfig.target_fps if args.fps is None else args.fps,
+                         start=args.start, end=args.end, use_cache=not args.no_cache)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "observe", help="detect 2d/3d landmarks in a video (MediaPipe Pose)",
+        description="Run MediaPipe Pose on a video resampled to --fps and write "
+                    f"{OBSERVATIONS_FILE}, {OVERLAY_FILE} (landmarks drawn on the frames) and "
+                    f"{CONFIG_FILE} into --out. A .json/.npz keypoints file (see "
+                    "docs/keypoints_format.md) is loaded instead of detected.")
+    p.add_argument("input", type=Path, metavar="VIDEO_OR_KEYPOINTS",
+                   help="video (mp4, avi, mov, ...) or keypoints file (.json, .npz)")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument("--fps", type=float, default=None, metavar="F",
+                   help=f"analysis frame rate, Hz (default {ObserveConfig.target_fps:g}; "
+                        "never above the video's own)")
+    p.add_argument("--start", type=float, default=None, metavar="S", help="start time, s")
+    p.add_argument("--end", type=float, default=None, metavar="E", help="end time, s")
+    p.add_argument("--no-cache", action="store_true", help="recompute even if cached")
+    p.add_argument("--no-overlay", action="store_true", help="skip the overlay video")
+    p.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    run = run_observe(args.input, args.out, config_from_args(args), overlay=not args.no_overlay)
+    print("observe: " + run.summary(), end="")
+    return 0

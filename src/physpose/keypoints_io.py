@@ -1,0 +1,192 @@
+"""Precomputed keypoints (the second way in): JSON or npz files -> Observations, and back.
+
+The format is documented in docs/keypoints_format.md. The npz variant uses the same key names
+as `observations.npz`, so an observations file is also a valid keypoints file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import zipfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from physpose.cache import atomic_path
+from physpose.errors import PhysposeError
+from physpose.joints import LANDMARK_NAMES, NUM_LANDMARKS
+from physpose.observations import Observations
+
+KEYPOINTS_EXTENSIONS = (".json", ".npz")
+_DOC = "see docs/keypoints_format.md"
+_REQUIRED = ("fps", "image_size", "keypoints2d")
+_OPTIONAL = ("world_landmarks", "camera_K", "timestamps", "detected", "interpolated",
+             "frame_indices", "masks", "source", "landmark_names", "format_version", "format")
+
+
+def is_keypoints_file(path: str | Path) -> bool:
+    """True if the extension says precomputed keypoints (.json or .npz)."""
+    return Path(path).suffix.lower() in KEYPOINTS_EXTENSIONS
+
+
+def load_keypoints(path: str | Path) -> Observations:
+    """Read a keypoints .json or .npz file into Observations, with errors naming file and frame."""
+    path = Path(path)
+    if not path.is_file():
+        raise PhysposeError("keypoints file not found", path=path, remedy="check the path")
+    ext = path.suffix.lower()
+    if ext == ".json":
+        raw = _read_json(path)
+    elif ext == ".npz":
+        raw = _read_npz(path)
+    else:
+        raise PhysposeError(f"unknown keypoints extension '{ext}'", path=path,
+                            remedy="use .json or .npz (" + _DOC + ")")
+    return _to_observations(raw, path)
+
+
+def save_keypoints(obs: Observations, path: str | Path) -> Path:
+    """Write Observations as a keypoints file, JSON or npz by the extension; atomic."""
+    path = Path(path)
+    ext = path.suffix.lower()
+    if ext == ".npz":
+        return obs.save(path)
+    if ext != ".json":
+        raise PhysposeError(f"unknown keypoints extension '{ext}'", path=path,
+                            remedy="use .json or .npz")
+    doc: dict[str, Any] = {
+        "format": "physpose-keypoints", "format_version": 1, "source": obs.source,
+        "landmark_names": list(LANDMARK_NAMES), "fps": float(obs.fps),
+        "image_size": [int(v) for v in obs.image_size],
+    }
+    for key in ("timestamps", "keypoints2d", "detected", "interpolated", "world_landmarks",
+                "camera_K", "frame_indices"):
+        value = getattr(obs, key)
+        if value is not None:
+            doc[key] = np.asarray(value).tolist()
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(doc, allow_nan=False))
+    return path
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    try:
+        doc = json.loads(path.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise PhysposeError(f"not valid JSON ({exc})", path=path,
+                            remedy="fix the file; " + _DOC) from None
+    if not isinstance(doc, dict):
+        raise PhysposeError("the JSON top level must be an object with keys "
+                            + ", ".join(_REQUIRED), path=path, remedy=_DOC)
+    return doc
+
+
+def _read_npz(path: Path) -> dict[str, Any]:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise PhysposeError(f"not a readable npz file ({exc})", path=path,
+                            remedy="write it with numpy.savez (no object arrays); " + _DOC) from None
+
+
+def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
+    def fail(problem: str, remedy: str, frame: int | None = None) -> None:
+        raise PhysposeError(problem, path=path, frame=frame, remedy=remedy + " (" + _DOC + ")")
+
+    missing = [k for k in _REQUIRED if k not in raw]
+    if missing:
+        fail(f"missing required key(s) {', '.join(missing)}",
+             f"add {', '.join(missing)}; required keys are {', '.join(_REQUIRED)}")
+    unknown = sorted(set(raw) - set(_REQUIRED) - set(_OPTIONAL))
+    if unknown:
+        fail(f"unknown key(s) {', '.join(unknown)}", "remove them or fix their spelling")
+    if "landmark_names" in raw and [str(n) for n in np.asarray(raw["landmark_names"]).ravel()] \
+            != list(LANDMARK_NAMES):
+        fail("landmark_names differ from MediaPipe's 33-landmark order",
+             "reorder the keypoints to MediaPipe Pose order")
+
+    fps = _number(raw["fps"])
+    if fps is None or not (math.isfinite(fps) and 0.5 <= fps <= 1000):
+        fail(f"fps {raw['fps']!r} is not a frame rate in 0.5-1000 Hz",
+             "set fps to the rate of the keypoints, e.g. 25")
+    size = _array(raw["image_size"], "image_size", fail)
+    if size.shape != (2,) or not np.all(np.isfinite(size)) or np.any(size <= 0) \
+            or np.any(size != np.round(size)):
+        fail(f"image_size {size.tolist()} must be [width, height] in positive whole pixels",
+             "set image_size to the video's frame size")
+
+    kp = _array(raw["keypoints2d"], "keypoints2d", fail)
+    if kp.ndim != 3 or kp.shape[1:] != (NUM_LANDMARKS, 3) or kp.shape[0] == 0:
+        fail(f"keypoints2d has shape {kp.shape}, expected (T, {NUM_LANDMARKS}, 3) with T >= 1",
+             "store per frame 33 MediaPipe-order rows of (x px, y px, confidence)")
+    t = kp.shape[0]
+    _check_finite(kp, "keypoints2d", fail,
+                  "mark a missing keypoint with confidence 0 and finite coordinates, not NaN")
+    conf = kp[..., 2]
+    out = (conf < 0) | (conf > 1)
+    if out.any():
+        f = int(np.argmax(out.any(axis=1)))
+        fail(f"keypoint confidence {conf[f][out[f]][0]:g} is outside [0, 1]",
+             "scale confidences to [0, 1]", f)
+
+    per_frame: dict[str, np.ndarray | None] = {}
+    for key, shape in (("world_landmarks", (t, NUM_LANDMARKS, 3)), ("timestamps", (t,)),
+                       ("detected", (t,)), ("interpolated", (t,)), ("frame_indices", (t,))):
+        value = None if raw.get(key) is None else _array(raw[key], key, fail)
+        if value is not None:
+            if value.shape != shape:
+                fail(f"{key} has shape {value.shape}, expected {shape} (T = {t} frames from "
+                     "keypoints2d)", f"give {key} one entry per frame")
+            _check_finite(value, key, fail, f"replace non-finite {key} values")
+        per_frame[key] = value
+    ts = per_frame["timestamps"]
+    if ts is None:
+        ts = np.arange(t) / fps
+    elif t > 1 and np.any(np.diff(ts) <= 0):
+        fail("timestamps are not strictly increasing",
+             "give one increasing time in seconds per frame", int(np.argmax(np.diff(ts) <= 0)) + 1)
+    detected = per_frame["detected"]
+    detected = (conf > 0).any(axis=1) if detected is None else detected.astype(bool)
+    interpolated = per_frame["interpolated"]
+    interpolated = np.zeros(t, bool) if interpolated is None else interpolated.astype(bool)
+
+    camera_k = None if raw.get("camera_K") is None else _array(raw["camera_K"], "camera_K", fail)
+    if camera_k is not None and (camera_k.shape != (3, 3) or not np.isfinite(camera_k).all()):
+        fail(f"camera_K has shape {camera_k.shape} or non-finite values, expected a finite "
+             "3x3 matrix", "give the intrinsics [[fx,0,cx],[0,fy,cy],[0,0,1]] in pixels")
+    masks = raw.get("masks")
+    source = raw.get("source")
+    return Observations(
+        source=str(path) if source is None else str(np.asarray(source)),
+        fps=float(fps), image_size=(int(size[0]), int(size[1])), timestamps=ts.astype(float),
+        keypoints2d=kp, detected=detected, interpolated=interpolated,
+        world_landmarks=per_frame["world_landmarks"], masks=None if masks is None else np.asarray(masks),
+        camera_K=camera_k,
+        frame_indices=None if per_frame["frame_indices"] is None
+        else per_frame["frame_indices"].astype(np.int64))
+
+
+def _number(value: Any) -> float | None:
+    arr = np.asarray(value)
+    if arr.shape != () or arr.dtype.kind not in "iuf":
+        return None
+    return float(arr)
+
+
+def _array(value: Any, key: str, fail) -> np.ndarray:
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        fail(f"{key} is not a rectangular array of numbers (ragged lists, nulls or strings)",
+             f"give {key} the same number of entries in every frame, numbers only")
+    return arr
+
+
+def _check_finite(arr: np.ndarray, key: str, fail, remedy: str) -> None:
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        frame = int(np.argmax(bad.reshape(len(arr), -1).any(axis=1))) if arr.ndim else None
+        fail(f"{key} contains NaN or infinite values", remedy, frame)
