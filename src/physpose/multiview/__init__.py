@@ -1,0 +1,1 @@
+"""Calibrated multi-view material: Qualisys calibration, triangulation, a 3d reference."""
