@@ -1,1 +1,43 @@
 """Exports of a result folder: BVH, glTF binary, CSV and JSON joint tables."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from physpose.errors import PhysposeError
+from physpose.export.bvh import write_bvh
+from physpose.export.gltf import write_glb
+from physpose.export.table import write_csv, write_json
+from physpose.render.bodymotion import reconstruction_motion
+from physpose.render.result import available_motions, load_result, pick_motion
+
+FORMATS = ("bvh", "glb", "csv", "json")
+# Default file name inside the result folder, per format.
+DEFAULT_NAMES = {"bvh": "motion.bvh", "glb": "motion.glb", "csv": "joints.csv",
+                 "json": "joints.json"}
+
+__all__ = ["FORMATS", "export"]
+
+
+def export(result_dir: str | Path, fmt: str, out: str | Path | None = None,
+           motion: str | None = None) -> Path:
+    """Export a result folder to `fmt` (bvh, glb, csv, json); returns the written file.
+
+    motion: 'physics' or 'kinematic'. None means the physics motion if the result has one, else
+    the kinematic one, for bvh/glb; and every motion the result holds, for csv/json.
+    """
+    if fmt not in FORMATS:
+        raise PhysposeError(f"unknown export format {fmt!r}",
+                            remedy=f"choose one of {', '.join(FORMATS)}")
+    rec, folder = load_result(result_dir)
+    out = Path(out) if out is not None else folder / DEFAULT_NAMES[fmt]
+    if fmt in ("csv", "json"):
+        motions = available_motions(rec) if motion is None else (pick_motion(rec, motion, folder),)
+        return (write_csv if fmt == "csv" else write_json)(rec, motions, out)
+    which = pick_motion(rec, motion, folder)
+    body = reconstruction_motion(rec, which)
+    if body is None:
+        raise PhysposeError(f"this result stores no body model and {which} qpos, which {fmt} "
+                            "export needs", path=folder,
+                            remedy="export csv or json, or re-run the reconstruction")
+    return (write_bvh if fmt == "bvh" else write_glb)(body, rec.fps, out)

@@ -1,0 +1,92 @@
+"""BVH export: the file re-read by our own parser and forward kinematics gives the body back."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from physpose.errors import PhysposeError
+from physpose.export import export
+from physpose.export.bvh import R_WORLD2BVH, bvh_positions, read_bvh, write_bvh
+from physpose.render.bodymotion import body_motion, reconstruction_motion
+from synthetic_result import make_reconstruction, save_result, tiny_humanoid_mjcf, walking_qpos
+
+
+def _positions_by_name(path, names):
+    clip = read_bvh(path)
+    pos = bvh_positions(clip) @ R_WORLD2BVH  # back to world axes (z up)
+    return pos[:, [clip.names.index(n) for n in names]], clip
+
+
+def test_round_trip_matches_body_positions_within_a_millimetre(tmp_path):
+    rec = make_reconstruction(num_frames=40)
+    motion = reconstruction_motion(rec, "physics")
+    path = write_bvh(motion, rec.fps, tmp_path / "m.bvh")
+    pos, clip = _positions_by_name(path, motion.tree.names)
+    assert np.abs(pos - motion.pos).max() < 1e-3
+    assert clip.motion.shape == (40, 6 + 3 * (len(motion.tree.names) - 1))
+    assert clip.frame_time == pytest.approx(1 / rec.fps)
+    # The offsets are the subject's segment lengths: thigh -> shin is 0.42 m in the model.
+    shin = clip.names.index("l_shin")
+    assert np.linalg.norm(clip.offsets[shin]) == pytest.approx(0.42, abs=1e-6)
+    assert set(clip.end_sites) == {clip.names.index(n) for n in
+                                   ("head", "l_forearm", "r_forearm", "l_foot", "r_foot")}
+
+
+def test_joint_sites_follow_from_the_bvh_bodies(tmp_path):
+    """A joint fixed on a body (the knee site) is recovered from that body's BVH pose."""
+    rec = make_reconstruction(num_frames=12)
+    motion = reconstruction_motion(rec, "physics")
+    path = write_bvh(motion, rec.fps, tmp_path / "m.bvh")
+    clip = read_bvh(path)
+    # Knee site sits at the shin origin, wrist 0.26 m below the forearm origin.
+    pos, _ = _positions_by_name(path, ("l_shin",))
+    knee = rec.joint_names.index("l_knee")
+    assert np.abs(pos[:, 0] - rec.joints_physics[:, knee]).max() < 1e-3
+    assert clip.names[0] == "pelvis" and clip.channels[0][:3] == ("Xposition", "Yposition",
+                                                                   "Zposition")
+
+
+def test_offset_hinge_gets_position_channels(tmp_path):
+    """A hinge away from its body's origin moves the body: the BVH carries that translation."""
+    spec = mujoco.MjSpec()
+    root = spec.worldbody.add_body(name="root", pos=[0, 0, 1])
+    root.add_freejoint(name="free")
+    root.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=[0.1, 0.1, 0.1])
+    arm = root.add_body(name="arm", pos=[0.3, 0, 0])
+    arm.add_joint(name="swing", type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 1, 0], pos=[-0.2, 0, 0])
+    arm.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, 0.3, 0, 0], size=[0.03, 0, 0])
+    model = spec.compile()
+    qpos = walking_qpos(model, 20)
+    motion = body_motion(spec.to_xml(), qpos)
+    path = write_bvh(motion, 25.0, tmp_path / "arm.bvh")
+    pos, clip = _positions_by_name(path, ("root", "arm"))
+    assert len(clip.channels[clip.names.index("arm")]) == 6
+    assert np.abs(pos - motion.pos).max() < 1e-3
+
+
+def test_export_uses_kinematic_qpos_when_there_is_no_physics(tmp_path):
+    folder = save_result(tmp_path, physics=False)
+    path = export(folder, "bvh")
+    assert path == folder / "motion.bvh"
+    rec = make_reconstruction(physics=False)
+    expected = body_motion(tiny_humanoid_mjcf(), rec.qpos_kinematic).pos
+    pos, _ = _positions_by_name(path, ("pelvis", "l_foot"))
+    assert np.abs(pos - expected[:, [0, 9]]).max() < 1e-3
+
+
+def test_export_without_a_body_model_is_a_clear_error(tmp_path):
+    folder = save_result(tmp_path, physics=False, qpos_kinematic=False)
+    with pytest.raises(PhysposeError, match="no body model"):
+        export(folder, "bvh")
+    with pytest.raises(PhysposeError, match="no physics motion"):
+        export(save_result(tmp_path / "b", physics=False), "bvh", motion="physics")
+
+
+def test_malformed_bvh_is_reported(tmp_path):
+    bad = tmp_path / "bad.bvh"
+    bad.write_text("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Yrotation Zrotation\n"
+                   "}\nMOTION\nFrames: 2\nFrame Time: 0.04\n1 2 3\n")
+    with pytest.raises(PhysposeError, match="expected 2 x 3"):
+        read_bvh(bad)

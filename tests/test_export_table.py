@@ -1,0 +1,75 @@
+"""CSV and JSON joint tables hold every joint of every motion at the analysis frames."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from physpose.errors import PhysposeError
+from physpose.export import export
+from physpose.export.table import CSV_COLUMNS
+from physpose.reconstruction import Reconstruction
+from synthetic_result import save_result
+
+
+def _read_csv(path, joint_names):
+    with path.open() as f:
+        rows = list(csv.DictReader(f))
+    out = {}
+    for r in rows:
+        arr = out.setdefault(r["motion"], {})
+        arr[(int(r["frame"]), joint_names.index(r["joint"]))] = (
+            float(r["x"]), float(r["y"]), float(r["z"]), float(r["time"]))
+    return rows, out
+
+
+def test_csv_round_trip_both_motions(tmp_path):
+    folder = save_result(tmp_path, num_frames=7)
+    rec = Reconstruction.load(folder)
+    path = export(folder, "csv")
+    assert path == folder / "joints.csv"
+    assert path.read_text().splitlines()[0] == ",".join(CSV_COLUMNS)
+    rows, table = _read_csv(path, rec.joint_names)
+    assert len(rows) == 2 * 7 * len(rec.joint_names)
+    for motion, joints in (("kinematic", rec.joints_kinematic), ("physics", rec.joints_physics)):
+        back = np.array([[table[motion][(t, j)][:3] for j in range(len(rec.joint_names))]
+                         for t in range(7)])
+        assert np.abs(back - joints).max() < 1e-6
+    assert table["physics"][(5, 0)][3] == pytest.approx(5 / rec.fps)
+
+
+def test_json_round_trip_and_motion_choice(tmp_path):
+    folder = save_result(tmp_path, num_frames=5)
+    rec = Reconstruction.load(folder)
+    doc = json.loads(export(folder, "json", out=tmp_path / "x" / "j.json").read_text())
+    assert doc["joint_names"] == list(rec.joint_names) and doc["fps"] == rec.fps
+    assert np.abs(np.array(doc["motions"]["kinematic"]) - rec.joints_kinematic).max() < 1e-6
+    assert np.abs(np.array(doc["motions"]["physics"]) - rec.joints_physics).max() < 1e-6
+    only = json.loads(export(folder, "json", motion="kinematic").read_text())
+    assert list(only["motions"]) == ["kinematic"]
+
+
+def test_kinematic_only_result_exports_kinematic_rows(tmp_path):
+    folder = save_result(tmp_path, num_frames=3, physics=False, qpos_kinematic=False)
+    rows, _ = _read_csv(export(folder, "csv"), Reconstruction.load(folder).joint_names)
+    assert {r["motion"] for r in rows} == {"kinematic"}
+    with pytest.raises(PhysposeError, match="no physics motion"):
+        export(folder, "csv", motion="physics")
+
+
+@pytest.mark.parametrize("problem", ["missing", "empty", "format"])
+def test_bad_input_is_a_clear_error(tmp_path, problem):
+    folder = save_result(tmp_path, num_frames=3)
+    if problem == "missing":
+        with pytest.raises(PhysposeError, match="result folder not found"):
+            export(tmp_path / "nope", "csv")
+    elif problem == "empty":
+        (tmp_path / "empty").mkdir()
+        with pytest.raises(PhysposeError, match="no reconstruction.npz"):
+            export(tmp_path / "empty", "csv")
+    else:
+        with pytest.raises(PhysposeError, match="unknown export format 'fbx'"):
+            export(folder, "fbx")
