@@ -63,8 +63,8 @@ def _open(path: Path) -> cv2.VideoCapture:
     cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
     if not cap.isOpened():
         cap.release()
-        raise PhysposeError("cannot open this file as a video (corrupt, truncated or an "
-                            "unsupported codec)", path=path, remedy=_REENCODE)
+        raise PhysposeError("cannot open this file as a video (no frames, corrupt, truncated "
+                            "or an unsupported codec)", path=path, remedy=_REENCODE)
     return cap
 
 

@@ -1,0 +1,219 @@
+"""The observe stage: gap filling, config checks, clear failures, caching, and the real clip."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from synthetic_video import make_noise_video
+
+from physpose.errors import PhysposeError
+from physpose.joints import LANDMARK_INDEX as LM
+from physpose.observe import (ObserveConfig, PoseDetector, downsample_mask, fill_gaps,
+                              mask_shape, observe)
+from physpose.video import plan_frames, probe, read_frames
+
+
+@pytest.fixture(autouse=True)
+def _private_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("PHYSPOSE_CACHE_DIR", str(tmp_path / "cache"))
+
+
+# --- pure helpers -------------------------------------------------------------------------
+
+def test_fill_gaps_interpolates_short_gaps_linearly():
+    values = np.array([0.0, 0, 0, 30, 0, 50, 0, 0, 0, 0, 100, 0])
+    detected = np.array([1, 0, 0, 1, 0, 1, 0, 0, 0, 0, 1, 0], bool)
+    filled, interp = fill_gaps(values, detected, max_gap=3)
+    np.testing.assert_allclose(filled[:6], [0, 10, 20, 30, 40, 50])
+    assert interp.tolist() == [0, 1, 1, 0, 1, 0, 0, 0, 0, 0, 0, 0]
+    np.testing.assert_array_equal(filled[6:], values[6:])  # gap of 4 > 3 and the trailing gap stay
+
+
+def test_fill_gaps_handles_landmark_arrays_and_uint8_masks():
+    kp = np.zeros((4, 33, 3))
+    kp[0], kp[3] = 1.0, 4.0
+    filled, interp = fill_gaps(kp, np.array([1, 0, 0, 1], bool), max_gap=2)
+    np.testing.assert_allclose(filled[1], 2.0)
+    np.testing.assert_allclose(filled[2], 3.0)
+    masks = np.zeros((3, 2, 2), np.uint8)
+    masks[0], masks[2] = 0, 255
+    filled_masks, _ = fill_gaps(masks, np.array([1, 0, 1], bool), max_gap=1)
+    assert filled_masks.dtype == np.uint8 and filled_masks[1, 0, 0] == 128
+
+
+def test_fill_gaps_with_zero_max_gap_fills_nothing():
+    filled, interp = fill_gaps(np.arange(3.0), np.array([1, 0, 1], bool), max_gap=0)
+    assert not interp.any() and filled[1] == 1.0
+
+
+def test_mask_is_downsampled_to_the_long_side():
+    assert mask_shape((1080, 1920), 256) == (256, 144)
+    prob = np.zeros((1920, 1080), np.float32)
+    prob[:960] = 1.0
+    small = downsample_mask(prob, 256)
+    assert small.shape == (256, 144) and small.dtype == np.uint8
+    assert small[:127].min() == 255 and small[129:].max() == 0
+
+
+def test_config_rejects_models_that_need_a_download():
+    with pytest.raises(PhysposeError, match="model_complexity=2 is not available offline"):
+        ObserveConfig(model_complexity=2)
+    with pytest.raises(PhysposeError, match="min_detection_fraction"):
+        ObserveConfig(min_detection_fraction=1.5)
+
+
+# --- failures on synthetic videos ---------------------------------------------------------
+
+def test_video_without_a_person_says_found_in_0_of_n(tmp_path):
+    path = make_noise_video(tmp_path / "empty_room.mp4", 12, fps=10)
+    with pytest.raises(PhysposeError, match=r"found in only 0 of 12 frames") as err:
+        observe(path, ObserveConfig(), progress=False)
+    assert "empty_room.mp4" in str(err.value) and "--start/--end" in str(err.value)
+    assert not any((tmp_path / "cache").rglob("*.npz"))  # failures are not cached
+
+
+def test_bad_target_rate_is_rejected_before_any_work(tmp_path):
+    path = make_noise_video(tmp_path / "v.mp4", 3)
+    with pytest.raises(PhysposeError, match="target frame rate 500"):
+        observe(path, ObserveConfig(target_fps=500), progress=False)
+
+
+# --- the real clip ------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def cam01(pose2sim_demo):
+    return observe(pose2sim_demo / "videos" / "cam01.mp4", ObserveConfig(use_cache=False),
+                   progress=False)
+
+
+def test_real_clip_is_detected_in_almost_every_frame(cam01):
+    assert cam01.fps == 25.0 and cam01.image_size == (1080, 1920)
+    assert cam01.num_frames == 42  # 100 frames at 60 fps -> 1.667 s at 25 fps
+    assert cam01.detected.mean() > 0.95
+    np.testing.assert_allclose(cam01.timestamps, cam01.frame_indices / 60.0)
+    assert cam01.masks.shape == (42, 256, 144)
+
+
+def test_real_clip_landmarks_are_anatomically_sane(cam01):
+    ok = cam01.detected
+    kp = cam01.keypoints2d[ok]
+    y = kp[..., 1]  # image rows grow downwards
+
+    def below(a: str, b: str) -> float:
+        return float(np.mean(y[:, LM[a]] > y[:, LM[b]]))
+
+    for side in ("left", "right"):
+        assert below(f"{side}_ankle", f"{side}_hip") > 0.95
+        assert below(f"{side}_knee", f"{side}_hip") > 0.95
+        assert below(f"{side}_hip", f"{side}_shoulder") > 0.95
+        assert below(f"{side}_hip", "nose") > 0.95
+    w, h = cam01.image_size
+    inside = (kp[..., 0] > 0) & (kp[..., 0] < w) & (kp[..., 1] > 0) & (kp[..., 1] < h)
+    assert inside[:, [LM["nose"], LM["left_hip"], LM["right_ankle"]]].all()
+    # metric: legs are leg-long, shoulders are shoulder-wide
+    world = cam01.world_landmarks[ok]
+
+    def dist(a: str, b: str) -> np.ndarray:
+        return np.linalg.norm(world[:, LM[a]] - world[:, LM[b]], axis=1)
+
+    for side in ("left", "right"):
+        leg = dist(f"{side}_hip", f"{side}_knee") + dist(f"{side}_knee", f"{side}_ankle")
+        assert 0.6 < np.median(leg) < 1.1
+    assert 0.2 < np.median(dist("left_shoulder", "right_shoulder")) < 0.5
+    hips = 0.5 * (world[:, LM["left_hip"]] + world[:, LM["right_hip"]])
+    assert np.abs(hips).max() < 0.05  # hip-centred
+
+
+def test_real_clip_mask_covers_the_person(cam01):
+    h, w = cam01.masks.shape[1:]
+    sx, sy = w / cam01.image_size[0], h / cam01.image_size[1]
+    on_body, hits = 0, 0
+    for t in np.flatnonzero(cam01.detected):
+        for name in ("left_hip", "right_hip", "left_shoulder", "right_shoulder"):
+            x, y = cam01.keypoints2d[t, LM[name], :2]
+            hits += 1
+            on_body += cam01.masks[t, min(h - 1, int(y * sy)), min(w - 1, int(x * sx))] > 127
+    assert on_body / hits > 0.9
+    assert cam01.masks.mean() < 0.3 * 255  # the person does not fill the frame
+
+
+def _world_axes_match_opencv(obs) -> tuple[float, float, float]:
+    """(corr of world x with image x, same for y, fraction of frames with the nose in front of
+    the chest under a right-handed frame)."""
+    ok = obs.detected
+    k = obs.keypoints2d[ok, :, :2]
+    w = obs.world_landmarks[ok]
+    kc, wc = k - k.mean(1, keepdims=True), w - w.mean(1, keepdims=True)
+    cx = np.corrcoef(kc[..., 0].ravel(), wc[..., 0].ravel())[0, 1]
+    cy = np.corrcoef(kc[..., 1].ravel(), wc[..., 1].ravel())[0, 1]
+    at = {n: w[:, LM[n]] for n in ("left_shoulder", "right_shoulder", "left_hip", "right_hip",
+                                   "nose")}
+    left = at["left_shoulder"] - at["right_shoulder"] + at["left_hip"] - at["right_hip"]
+    up = at["left_shoulder"] + at["right_shoulder"] - at["left_hip"] - at["right_hip"]
+    forward = np.cross(left, up)  # body frame: left x up = forward when right-handed
+    nose = at["nose"] - 0.5 * (at["left_shoulder"] + at["right_shoulder"])
+    return cx, cy, float(np.mean(np.sum(nose * forward, axis=1) > 0))
+
+
+def test_world_landmarks_use_opencv_camera_axes(cam01):
+    cx, cy, ahead = _world_axes_match_opencv(cam01)
+    assert cx > 0.9 and cy > 0.9  # x right, y down, like the image
+    assert ahead > 0.95           # right-handed, so z points away from the camera
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("view", ["cam02", "cam03", "cam04"])
+def test_world_axes_hold_in_every_view(pose2sim_demo, view):
+    obs = observe(pose2sim_demo / "videos" / f"{view}.mp4", ObserveConfig(use_cache=False),
+                  progress=False)
+    assert obs.detected.mean() > 0.95
+    cx, cy, ahead = _world_axes_match_opencv(obs)
+    assert cx > 0.9 and cy > 0.9 and ahead > 0.95
+
+
+def test_short_gaps_are_interpolated_and_long_gaps_flagged(pose2sim_demo, tmp_path):
+    info = probe(pose2sim_demo / "videos" / "cam01.mp4")
+    plan = plan_frames(info, 25)
+    path = tmp_path / "gaps.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25, (270, 480))
+    blank = {10, 11} | set(range(18, 26))  # a 2-frame and an 8-frame blackout
+    for k, (_, image) in enumerate(read_frames(info, plan.indices[:30])):
+        image = cv2.resize(image, (270, 480), interpolation=cv2.INTER_AREA)
+        writer.write(image * 0 if k in blank else image)
+    writer.release()
+    obs = observe(path, ObserveConfig(max_gap_frames=5), progress=False)
+    assert np.flatnonzero(~obs.detected).tolist() == sorted(blank)
+    assert np.flatnonzero(obs.interpolated).tolist() == [10, 11]
+    kp = obs.keypoints2d
+    np.testing.assert_allclose(kp[10], kp[9] + (kp[12] - kp[9]) / 3)
+    assert (kp[18:26] == 0).all() and (obs.world_landmarks[18:26] == 0).all()
+
+
+def test_cache_hit_for_same_settings_miss_when_they_change(pose2sim_demo, tmp_path, monkeypatch):
+    calls = []
+    original = PoseDetector.detect
+
+    def counting(self, image):
+        calls.append(1)
+        return original(self, image)
+
+    monkeypatch.setattr(PoseDetector, "detect", counting)
+    video = pose2sim_demo / "videos" / "cam02.mp4"
+    cfg = ObserveConfig(end=0.2)  # 5 frames
+    first = observe(video, cfg, progress=False)
+    assert len(calls) == 5
+    again = observe(video, cfg, progress=False)
+    assert len(calls) == 5  # hit: MediaPipe did not run
+    np.testing.assert_array_equal(again.keypoints2d, first.keypoints2d)
+    np.testing.assert_array_equal(again.masks, first.masks)
+    assert again.image_size == first.image_size and again.fps == first.fps
+    observe(video, ObserveConfig(end=0.2, mask_long_side=64), progress=False)
+    assert len(calls) == 10  # miss: a setting changed
+    observe(video, ObserveConfig(end=0.2, use_cache=False), progress=False)
+    assert len(calls) == 15  # use_cache=False always recomputes
+    assert len(list((tmp_path / "cache" / "observe").glob("*.npz"))) == 2
+    copy = tmp_path / "renamed.mp4"
+    copy.write_bytes(video.read_bytes())
+    moved = observe(copy, cfg, progress=False)
+    assert len(calls) == 15 and moved.source == str(copy)  # keyed by content, not by name
