@@ -1,0 +1,87 @@
+"""The stage cache: keys change with file bytes, config and version; entries round-trip."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from physpose.cache import Cache, atomic_path, canonical_json, file_digest, stage_key
+
+
+@dataclass(frozen=True)
+class _Cfg:
+    a: float = 1.0
+    b: tuple[int, ...] = (1, 2)
+    c: str | None = None
+
+
+def test_key_depends_on_bytes_config_version_and_stage(tmp_path):
+    f = tmp_path / "in.bin"
+    f.write_bytes(b"abc")
+    base = stage_key("s", version=1, files=[f], config=_Cfg())
+    assert base == stage_key("s", version=1, files=[f], config=_Cfg())
+    assert base != stage_key("s", version=2, files=[f], config=_Cfg())
+    assert base != stage_key("t", version=1, files=[f], config=_Cfg())
+    assert base != stage_key("s", version=1, files=[f], config=_Cfg(a=1.5))
+    assert base != stage_key("s", version=1, files=[f], config=_Cfg(), extra={"k": 1})
+    g = tmp_path / "other_name.bin"
+    g.write_bytes(b"abc")
+    assert base == stage_key("s", version=1, files=[g], config=_Cfg())  # content, not name
+    f.write_bytes(b"abd")
+    assert base != stage_key("s", version=1, files=[f], config=_Cfg())
+
+
+def test_file_digest_is_sha256_of_the_bytes(tmp_path):
+    f = tmp_path / "x"
+    f.write_bytes(b"hello")
+    assert file_digest(f) == "2cf24dba5fb0a30e26e83b2ac5b9e29e1b161e5c1fa7425e73043362938b9824"
+
+
+def test_canonical_json_sorts_keys_and_hashes_arrays():
+    assert canonical_json({"b": 1, "a": (2, 3)}) == '{"a":[2,3],"b":1}'
+    assert canonical_json(np.zeros(3)) != canonical_json(np.ones(3))
+    with pytest.raises(TypeError, match="cannot put a object"):
+        canonical_json(object())
+
+
+def test_put_get_round_trip_and_miss(tmp_path):
+    cache = Cache("stage", root=tmp_path)
+    key = stage_key("stage", version=1, config={"x": 1})
+    assert cache.get(key) is None
+    path = cache.put(key, {"a": np.arange(4), "s": np.array("text")})
+    assert path == tmp_path / "stage" / f"{key}.npz"
+    got = cache.get(key)
+    np.testing.assert_array_equal(got["a"], np.arange(4))
+    assert str(got["s"]) == "text"
+    assert [p.name for p in (tmp_path / "stage").iterdir()] == [f"{key}.npz"]  # no temp left
+
+
+def test_corrupt_entry_is_a_miss_and_is_removed(tmp_path, caplog):
+    cache = Cache("stage", root=tmp_path)
+    key = "ab" * 32
+    cache.path(key).parent.mkdir(parents=True)
+    cache.path(key).write_bytes(b"not an npz")
+    assert cache.get(key) is None
+    assert not cache.path(key).exists() and "unreadable cache entry" in caplog.text
+
+
+def test_atomic_path_keeps_the_old_file_on_failure(tmp_path):
+    target = tmp_path / "out.txt"
+    target.write_text("old")
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("boom")
+    assert target.read_text() == "old" and list(tmp_path.iterdir()) == [target]
+    with atomic_path(target) as tmp:
+        tmp.write_text("new")
+    assert target.read_text() == "new"
+
+
+def test_bad_stage_names_and_keys_are_refused(tmp_path):
+    with pytest.raises(ValueError):
+        Cache("../escape", root=tmp_path)
+    with pytest.raises(ValueError):
+        Cache("ok", root=tmp_path).path("../../etc")
