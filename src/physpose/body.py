@@ -50,9 +50,13 @@ SEGMENT_MASS_PERCENT["neutral"] = {k: 0.5 * (SEGMENT_MASS_PERCENT["male"][k]
                                              + SEGMENT_MASS_PERCENT["female"][k])
                                    for k in SEGMENT_MASS_PERCENT["male"]}
 # Body pairs that always touch in the rest pose although they are not parent and child: the
-# upper arms and neck sit on the chest through the small shoulder-girdle body.
+# upper arms and neck sit on the chest through the small shoulder-girdle body, and the trunk
+# capsules overlap along the spine.
 EXCLUDED_PAIRS: tuple[tuple[str, str], ...] = (
-    ("spine", "l_shoulder"), ("spine", "r_shoulder"), ("spine", "neck"))
+    ("spine", "l_shoulder"), ("spine", "r_shoulder"), ("spine", "neck"), ("pelvis", "thorax"))
+# Thighs are kept from overlapping each other in the rest pose (their radius is capped at this
+# fraction of half the hip width; the mass table, not the volume, sets their mass).
+_MAX_THIGH_RADIUS_PER_HALF_HIP = 0.9
 
 _CAPSULE = mujoco.mjtGeom.mjGEOM_CAPSULE
 _BOX = mujoco.mjtGeom.mjGEOM_BOX
@@ -170,7 +174,8 @@ def _geometry(shape: BodyShape) -> dict[str, list[_GeomPlan]]:
         geoms[f"{side}_wrist"] = [_box(f"{side}_hand", (0, 0, -0.5 * s.hand_length),
                                        (0.5 * s.hand_width, 0.5 * s.hand_thickness,
                                         0.5 * s.hand_length))]
-        geoms[f"{side}_hip"] = [_capsule(f"{side}_thigh", s.r_thigh, (0, 0, 0), (0, 0, -s.thigh))]
+        r_thigh = min(s.r_thigh, _MAX_THIGH_RADIUS_PER_HALF_HIP * 0.5 * hw)
+        geoms[f"{side}_hip"] = [_capsule(f"{side}_thigh", r_thigh, (0, 0, 0), (0, 0, -s.thigh))]
         geoms[f"{side}_knee"] = [_capsule(f"{side}_shank", s.r_shank, (0, 0, 0),
                                           (0, 0, -max(s.shank - s.r_shank, 0.5 * s.shank)))]
         geoms[f"{side}_ankle"] = [_box(f"{side}_foot",

@@ -6,7 +6,7 @@ fig. 4.1): hip joint at 0.530 H, knee 0.285 H, ankle 0.039 H, shoulder 0.818 H (
 elbow 0.630 H, wrist 0.485 H, eye 0.936 H, foot length 0.152 H, foot breadth 0.055 H, hand
 0.108 H. Joint-centre distances (hips, shoulders) are narrower than the bony widths
 (bitrochanteric 0.191 H, biacromial 0.259 H). Radii are those of a 1.75 m adult of BMI 22,
-scaled so that volume follows mass: r ~ sqrt(BMI x H).
+scaled by H / 1.75 and sqrt(BMI / 22), BMI clipped to 15-40 for the geometry.
 """
 
 from __future__ import annotations
@@ -46,6 +46,7 @@ _REFERENCE_RADIUS: dict[str, float] = {
 }
 _REFERENCE_HEIGHT = 1.75  # m
 _REFERENCE_BMI = 22.0  # kg/m^2
+_GEOMETRY_BMI_RANGE = (15.0, 40.0)  # kg/m^2, BMI range over which radii follow the mass
 # Box sizes relative to the bones: hand length per wrist-to-index distance; widths per stature.
 _HAND_LENGTH_PER_HAND = 2.1
 _HAND_WIDTH = 0.048     # x H (palm breadth ~ 0.085 m at 1.75 m)
@@ -188,15 +189,23 @@ def _assemble(height: float, mass: float | None, build: str, sex: str,
               bones: dict[str, float]) -> BodyShape:
     if mass is None:
         mass = mass_from_height(height, build)
+        if not MASS_RANGE[0] <= mass <= MASS_RANGE[1]:
+            raise PhysposeError(
+                f"the mass estimated for a height of {height:g} m at BMI {BUILD_BMI[build]:g} "
+                f"is {mass:.1f} kg, outside {MASS_RANGE[0]:g}-{MASS_RANGE[1]:g} kg",
+                remedy="give the body mass explicitly")
     _check_mass(mass)
-    # Volume ~ r^2 H and mass ~ BMI H^2, so r ~ sqrt(BMI H).
-    k = float(np.sqrt((mass / height ** 2) / _REFERENCE_BMI * height / _REFERENCE_HEIGHT))
+    # Radii scale with the height (geometric similarity, so limbs clear the trunk at any
+    # stature) and with sqrt(BMI) (cross-section ~ mass per height^2). Beyond a plausible BMI
+    # the segments get denser instead of wider.
+    bmi = float(np.clip(mass / height ** 2, *_GEOMETRY_BMI_RANGE))
+    k = float(height / _REFERENCE_HEIGHT * np.sqrt(bmi / _REFERENCE_BMI))
     radii = {f"r_{n}": r * k for n, r in _REFERENCE_RADIUS.items()}
     return BodyShape(
         height=float(height), mass=float(mass), sex=sex, **bones, **radii,
         hand_length=_HAND_LENGTH_PER_HAND * bones["hand"],
-        hand_width=_HAND_WIDTH * height * np.sqrt(k),
-        hand_thickness=_HAND_THICKNESS * height * np.sqrt(k),
+        hand_width=_HAND_WIDTH * height,
+        hand_thickness=_HAND_THICKNESS * height * np.sqrt(bmi / _REFERENCE_BMI),
         foot_width=_FOOT_WIDTH * height,
         foot_height=_FOOT_HEIGHT_PER_ANKLE * bones["ankle_height"],
     )
