@@ -1,0 +1,148 @@
+"""The report's data: motions, body, contacts, metric rows and plot series, as JSON-able dicts."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from physpose.reconstruction import Reconstruction
+from physpose.render.bodymotion import BodyMotion, GeomShape, reconstruction_motion
+from physpose.render.result import available_motions, joints_of
+from physpose.render.skeleton import FEET, edge_indices, foot_contacts, foot_heights
+
+_DECIMALS = 4  # metres: 0.1 mm in the page's data
+# Plot colours per (motion, foot); the viewer uses the same blue/orange per motion.
+_SERIES_COLORS = {("physics", "left"): "#2f6fd6", ("physics", "right"): "#7fa8ea",
+                  ("kinematic", "left"): "#f08a24", ("kinematic", "right"): "#f5b877"}
+_TERM_COLORS = ("#2f6fd6", "#f08a24", "#2a9d4b", "#c03a8a", "#8a5cc2", "#6b7280", "#b08900")
+_LOG_RANGE = 100.0  # plot window losses on a log axis when they span more than this factor
+
+
+def _r(a: np.ndarray) -> list:
+    return np.round(np.asarray(a, dtype=float), _DECIMALS).reshape(-1).tolist()
+
+
+def _geom_dict(g: GeomShape) -> dict:
+    return {"name": g.name, "body": g.body, "kind": g.kind, "size": list(g.size),
+            "pos": list(g.pos), "quat": list(g.quat), "rgba": list(g.rgba)}
+
+
+def report_data(rec: Reconstruction, title: str = "physpose result") -> dict:
+    """Everything the page shows, computed from one result."""
+    motions, bodies = {}, {}
+    for name in available_motions(rec):
+        joints = joints_of(rec, name)
+        body = reconstruction_motion(rec, name)
+        bodies[name] = body
+        heights = foot_heights(joints, rec.joint_names)
+        index = {n: i for i, n in enumerate(rec.joint_names)}
+        feet_xy = np.stack([joints[:, [index[n] for n in names], :2].mean(axis=1)
+                            for names in FEET.values()], axis=1)          # (T, 2, 2)
+        motions[name] = {
+            "joints": _r(joints),
+            "body_pos": None if body is None else _r(body.pos),
+            "body_quat": None if body is None else _r(body.quat),
+            "feet_xy": np.round(feet_xy, _DECIMALS).reshape(-1, 2).tolist(),
+            "contacts": foot_contacts(heights).astype(int).reshape(-1).tolist(),
+        }
+    tree = next((b.tree for b in bodies.values() if b is not None), None)
+    best = "physics" if rec.has_physics else "kinematic"
+    all_joints = joints_of(rec, best)
+    center = all_joints[:, 0].mean(axis=0)
+    return {
+        "title": title, "fps": rec.fps, "frames": rec.num_frames,
+        "joint_names": list(rec.joint_names), "edges": edge_indices(rec.joint_names).tolist(),
+        "default_motion": best, "motions": motions,
+        "body": None if tree is None else {
+            "names": list(tree.names), "parents": list(tree.parents),
+            "geoms": [_geom_dict(g) for g in tree.geoms],
+            "scene": [_geom_dict(g) for g in tree.scene]},
+        "center": [float(center[0]), float(center[1]), 0.0],
+        "extent": float(np.abs(all_joints[..., :2] - center[:2]).max()),
+        "plots": _plots(rec, bodies),
+    }
+
+
+def _plots(rec: Reconstruction, bodies: dict[str, BodyMotion | None]) -> list[dict]:
+    time = _r(np.arange(rec.num_frames) / rec.fps)
+    plots = []
+    series, bands = [], []
+    for name in available_motions(rec):
+        heights = foot_heights(joints_of(rec, name), rec.joint_names)
+        contacts = foot_contacts(heights)
+        for k, foot in enumerate(FEET):
+            color = _SERIES_COLORS[(name, foot)]
+            series.append({"name": f"{name} {foot}", "y": _r(heights[:, k]), "color": color,
+                           "dash": name == "kinematic"})
+            bands.append({"name": f"{name} {foot} contact", "on": contacts[:, k].tolist(),
+                          "color": color})
+    plots.append({"id": "feet", "title": "Foot height and contacts", "xlabel": "time (s)",
+                  "ylabel": "m", "x": time, "series": series, "bands": bands, "cursor": True})
+    com = [{"name": name, "y": _r(body.com[:, 2]), "color": _SERIES_COLORS[(name, "left")],
+            "dash": name == "kinematic"} for name, body in bodies.items() if body is not None]
+    if com:
+        plots.append({"id": "com", "title": "Centre of mass height", "xlabel": "time (s)",
+                      "ylabel": "m", "x": time, "series": com, "cursor": True})
+    if rec.has_physics:
+        gap = np.linalg.norm(rec.joints_physics - rec.joints_kinematic, axis=-1).mean(axis=1)
+        plots.append({"id": "gap", "title": "Physics vs kinematic (mean joint distance)",
+                      "xlabel": "time (s)", "ylabel": "cm", "x": time, "cursor": True,
+                      "series": [{"name": "distance", "y": _r(100 * gap), "color": "#444"}]})
+    losses = window_losses(rec.meta)
+    if losses is not None:
+        plots.append(losses)
+    return plots
+
+
+def window_losses(meta: dict) -> dict | None:
+    """Plot spec of the per-term loss of each dynamics window, from meta['dynamics']['windows'].
+
+    Each window is a dict with its terms under 'terms' or 'losses' ({name: value}) and its
+    start time under 'start' (s; the window index when absent). Terms absent from a window
+    leave a gap; None when no window has any term.
+    """
+    windows = (meta.get("dynamics") or {}).get("windows") or []
+    rows = [w.get("terms") or w.get("losses") or {} for w in windows if isinstance(w, dict)]
+    names = sorted({k for r in rows for k, v in r.items() if _finite(v)})
+    if not names:
+        return None
+    x = [float(w.get("start", i)) if isinstance(w, dict) else float(i)
+         for i, w in enumerate(windows)]
+    series = [{"name": n, "y": [float(r[n]) if _finite(r.get(n)) else None for r in rows],
+               "color": _TERM_COLORS[k % len(_TERM_COLORS)], "markers": True}
+              for k, n in enumerate(names)]
+    values = [v for s in series for v in s["y"] if v is not None]
+    log = min(values) > 0 and max(values) / min(values) > _LOG_RANGE
+    has_start = all(isinstance(w, dict) and "start" in w for w in windows)
+    return {"id": "losses", "title": "Loss per window and term" + (" (log)" if log else ""),
+            "xlabel": "window start (s)" if has_start else "window", "ylabel": "loss",
+            "x": x, "series": series, "log_y": log, "cursor": has_start}
+
+
+def _finite(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def metric_rows(rec: Reconstruction, metrics: dict | None) -> tuple[list, list]:
+    """(columns, rows) of the metric table: {name: value} or {group: {name: value}}."""
+    if metrics is None:
+        metrics = rec.meta.get("metrics") or {}
+    if metrics and all(isinstance(v, dict) for v in metrics.values()):
+        columns = list(metrics)
+        names = list(dict.fromkeys(k for v in metrics.values() for k in v))
+        return columns, [[n] + [metrics[c].get(n) for c in columns] for n in names]
+    return ["value"], [[k, v] for k, v in metrics.items()]
+
+
+def summary_rows(rec: Reconstruction, folder: Path) -> list[tuple[str, str]]:
+    """Facts about the result shown above the metrics."""
+    rows = [("result", str(folder)), ("frames", str(rec.num_frames)),
+            ("frame rate", f"{rec.fps:g} Hz"),
+            ("duration", f"{rec.num_frames / rec.fps:.2f} s"),
+            ("motions", ", ".join(available_motions(rec)))]
+    source = rec.meta.get("source")
+    if source:
+        rows.insert(1, ("video", str(source)))
+    return rows

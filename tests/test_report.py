@@ -1,0 +1,82 @@
+"""The HTML report without a browser: one self-contained file with the data the viewer needs."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+import physpose.report as report
+from physpose.errors import PhysposeError
+from physpose.report import build_report
+from physpose.report.data import window_losses
+from synthetic_result import save_result
+
+needs_bundle = pytest.mark.skipif(not report.BUNDLE.is_file(),
+                                  reason="viewer bundle not built; run `make setup` (make web)")
+
+
+def _data(page: str) -> dict:
+    m = re.search(r'<script type="application/json" id="physpose-data">(.*?)</script>', page, re.S)
+    assert m, "data block missing"
+    return json.loads(m.group(1))
+
+
+@needs_bundle
+def test_report_is_self_contained_and_carries_both_motions(tmp_path):
+    folder = save_result(tmp_path, num_frames=20)
+    path = build_report(folder)
+    assert path == folder / "report.html"
+    page = path.read_text()
+    assert "three.js" not in re.findall(r'src="([^"]+)"', page)
+    assert not re.search(r'<(script|link)[^>]+(src|href)="(https?:)?//', page), "external asset"
+    # Exactly one data block and one inline script; the bundle never closes the script early.
+    assert page.count("<script") == 2 and page.count("</script>") == 2
+    data = _data(page)
+    assert data["frames"] == 20 and data["default_motion"] == "physics"
+    assert set(data["motions"]) == {"kinematic", "physics"}
+    phys = data["motions"]["physics"]
+    assert len(phys["joints"]) == 20 * 21 * 3
+    assert len(phys["body_pos"]) == 20 * len(data["body"]["names"]) * 3
+    assert len(phys["contacts"]) == 20 * 2 and len(phys["feet_xy"]) == 40
+    assert {p["id"] for p in data["plots"]} == {"feet", "com", "gap", "losses"}
+    for element in ('id="view"', 'id="play"', 'id="scrub"', 'id="frame"', 'value="kinematic"'):
+        assert element in page
+    assert "mpjpe_g_mm" in page and "41.5" in page
+
+
+@needs_bundle
+def test_kinematic_only_result_without_body_draws_a_skeleton(tmp_path):
+    folder = save_result(tmp_path, num_frames=8, physics=False, qpos_kinematic=False, meta={})
+    data = _data(build_report(folder, tmp_path / "r" / "k.html").read_text())
+    assert list(data["motions"]) == ["kinematic"] and data["body"] is None
+    assert data["motions"]["kinematic"]["body_pos"] is None
+    assert len(data["edges"]) == 22
+    # Plots of what is present only: no physics gap, no centre of mass, no losses.
+    assert [p["id"] for p in data["plots"]] == ["feet"]
+
+
+@needs_bundle
+def test_metrics_argument_with_groups_becomes_columns(tmp_path):
+    folder = save_result(tmp_path, num_frames=4)
+    metrics = {"kinematic": {"mpjpe_mm": 80.0}, "physics": {"mpjpe_mm": 70.5, "skate_pct": 1.0}}
+    page = build_report(folder, metrics=metrics).read_text()
+    assert "<th>kinematic</th><th>physics</th>" in page
+    assert '<td>skate_pct</td><td>—</td><td class="num">1</td>' in page
+
+
+def test_window_losses_plot_what_is_present():
+    windows = [{"start": 0.0, "terms": {"com": 2.0, "pose": float("nan")}},
+               {"start": 0.5, "losses": {"com": 1.0, "2d": 500.0}}]
+    spec = window_losses({"dynamics": {"windows": windows}})
+    assert [s["name"] for s in spec["series"]] == ["2d", "com"]
+    assert spec["series"][0]["y"] == [None, 500.0] and spec["x"] == [0.0, 0.5]
+    assert spec["log_y"] is True
+    assert window_losses({}) is None and window_losses({"dynamics": {"windows": [{}]}}) is None
+
+
+def test_missing_bundle_tells_the_user_to_run_setup(tmp_path, monkeypatch):
+    monkeypatch.setattr(report, "BUNDLE", tmp_path / "absent.js")
+    with pytest.raises(PhysposeError, match="make setup"):
+        build_report(save_result(tmp_path, num_frames=3))
