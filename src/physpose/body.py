@@ -266,13 +266,19 @@ def build_body(shape: BodyShape, scene: SceneConfig = SceneConfig(),
                             dampratio=config.dampratio)
         act.forcelimited = True
         act.forcerange = [-float(limits[k]), float(limits[k])]
+    model = _compile(spec)
+    stand = _standing(model)
+    spec.add_key(name="standing", qpos=stand.tolist(), ctrl=stand[7:].tolist())
+    return _index(shape, scene, config, spec, _compile(spec), masses, limits)
+
+
+def _compile(spec: mujoco.MjSpec) -> mujoco.MjModel:
     try:
-        model = spec.compile()
+        return spec.compile()
     except ValueError as err:  # MuJoCo reports compile problems as ValueError
         raise PhysposeError(f"the body model did not compile: {err}",
                             remedy="check the body shape (lengths and radii) for odd values") \
             from err
-    return _index(shape, scene, config, spec, model, masses, limits)
 
 
 def _landmark_of_joint(joint: str) -> str:
@@ -308,7 +314,7 @@ def _index(shape, scene, config, spec, model, masses, limits) -> Body:
     )
 
 
-def rest_qpos(body: Body | None = None) -> np.ndarray:
+def rest_qpos() -> np.ndarray:
     """qpos of the rest pose with the pelvis at the origin, identity orientation: (55,)."""
     q = np.zeros(NQ)
     q[3] = 1.0
@@ -317,13 +323,17 @@ def rest_qpos(body: Body | None = None) -> np.ndarray:
 
 def standing_qpos(body: Body, xy: tuple[float, float] = (0.0, 0.0), yaw: float = 0.0,
                   arm_abduction: float | None = None) -> np.ndarray:
-    """A relaxed standing pose with the soles on z = 0: (55,) qpos.
+    """A relaxed standing pose with the soles on z = 0: (55,) qpos (also keyframe "standing").
 
     Knees and hips straight, arms hanging slightly away from the body: the shoulder abduction
     (rad) is the smallest multiple of 2 degrees from 4 degrees on at which no body geom touches
     another, unless ``arm_abduction`` is given. Facing +x rotated by ``yaw`` (rad) about z.
     """
-    model = body.model
+    return _standing(body.model, xy, yaw, arm_abduction)
+
+
+def _standing(model: mujoco.MjModel, xy: tuple[float, float] = (0.0, 0.0), yaw: float = 0.0,
+              arm_abduction: float | None = None) -> np.ndarray:
     data = mujoco.MjData(model)
     q = rest_qpos()
     q[3:7] = [math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)]

@@ -15,6 +15,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "data",
     "observe",
     "demo",
+    "body",
 )
 
 
