@@ -11,7 +11,8 @@ clip by tests/test_observe.py: world x/y grow with image x/y, and the nose lies 
 chest under the right-handed cross product.)
 
 Frames without a detection are flagged; gaps of at most `max_gap_frames` between two detected
-frames are filled by linear interpolation and flagged `interpolated`. Results are cached
+frames are filled by linear interpolation (positions, confidences, world landmarks and masks)
+and flagged `interpolated`. Results are cached
 (`physpose.cache`) by the video's bytes, the config and OBSERVE_VERSION.
 """
 
