@@ -131,7 +131,7 @@ def camera() -> tuple[np.ndarray, np.ndarray]:
     """K (3, 3) and T_world2cam (4, 4) of a camera 5 m to the -y side, looking at the walker."""
     w, h = IMAGE_SIZE
     k = np.array([[300.0, 0, w / 2], [0, 300.0, h / 2], [0, 0, 1]])
-    r_cam2world = np.array([[1.0, 0, 0], [0, 0, 1], [0, -1, 0]]).T  # columns: x, y, z of cam
+    r_cam2world = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]]).T  # columns: cam x, y, z
     center = np.array([1.0, -5.0, 1.0])
     t = np.eye(4)
     t[:3, :3] = r_cam2world.T
