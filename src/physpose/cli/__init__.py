@@ -16,6 +16,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "observe",
     "demo",
     "body",
+    "export",
 )
 
 
