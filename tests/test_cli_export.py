@@ -1,0 +1,68 @@
+"""`physpose export / report / overlay`: files on success, a clear message and exit 2 on bad input."""
+
+from __future__ import annotations
+
+import pytest
+
+import physpose.report as report
+from physpose.cli import main
+from synthetic_result import save_result
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("cli")
+    return {"physics": save_result(tmp / "p", num_frames=6),
+            "kinematic": save_result(tmp / "k", num_frames=6, physics=False)}
+
+
+@pytest.mark.parametrize("fmt, name", [("bvh", "motion.bvh"), ("glb", "motion.glb"),
+                                       ("csv", "joints.csv"), ("json", "joints.json")])
+def test_export_each_format(results, fmt, name, capsys):
+    assert main(["export", str(results["physics"]), "--format", fmt]) == 0
+    path = results["physics"] / name
+    assert capsys.readouterr().out.strip() == str(path) and path.stat().st_size > 0
+
+
+def test_export_to_a_chosen_file(results, tmp_path):
+    out = tmp_path / "deep" / "walk.bvh"
+    assert main(["export", str(results["kinematic"]), "-f", "bvh", "--out", str(out)]) == 0
+    assert out.read_text().startswith("HIERARCHY")
+
+
+def test_overlay_video_and_png(results, tmp_path, capsys):
+    assert main(["overlay", str(results["physics"]), "--out", str(tmp_path / "o.mp4")]) == 0
+    assert "plain background" in capsys.readouterr().out
+    assert main(["overlay", str(results["kinematic"]), "--png-frame", "2"]) == 0
+    assert (results["kinematic"] / "overlay_2.png").stat().st_size > 0
+
+
+@pytest.mark.skipif(not report.BUNDLE.is_file(), reason="viewer bundle not built; run make setup")
+def test_report(results, capsys):
+    assert main(["report", str(results["kinematic"])]) == 0
+    assert (results["kinematic"] / "report.html").is_file()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["export", "{missing}", "-f", "csv"], "result folder not found"),
+    (["export", "{empty}", "-f", "glb"], "holds no reconstruction.npz"),
+    (["export", "{kinematic}", "-f", "bvh", "--motion", "physics"], "no physics motion"),
+    (["report", "{missing}"], "result folder not found"),
+    (["report", "{empty}"], "holds no reconstruction.npz"),
+    (["overlay", "{missing}"], "result folder not found"),
+    (["overlay", "{physics}", "--video", "{missing}/v.mp4"], "file not found"),
+    (["overlay", "{physics}", "--png-frame", "99"], "outside the result"),
+])
+def test_bad_input_gives_a_message_and_exit_2(results, tmp_path, capsys, argv, message):
+    (tmp_path / "empty").mkdir()
+    where = {"missing": tmp_path / "nope", "empty": tmp_path / "empty", **results}
+    assert main([a.format(**where) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_unknown_format_is_rejected_by_the_parser(results, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["export", str(results["physics"]), "--format", "fbx"])
+    assert exit_.value.code == 2
+    assert "invalid choice: 'fbx'" in capsys.readouterr().err
