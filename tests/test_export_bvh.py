@@ -90,3 +90,30 @@ def test_malformed_bvh_is_reported(tmp_path):
                    "}\nMOTION\nFrames: 2\nFrame Time: 0.04\n1 2 3\n")
     with pytest.raises(PhysposeError, match="expected 2 x 3"):
         read_bvh(bad)
+
+
+def test_real_body_round_trips_through_bvh_and_glb(tmp_path):
+    """physpose.body's 48-hinge model: BVH and glTF both give its body positions back."""
+    from physpose.body import build_body, standing_qpos
+    from physpose.export.gltf import read_glb, write_glb
+    from physpose.shape import BodyShape
+    from test_export_gltf import animated_world_positions, structural_problems
+
+    body = build_body(BodyShape.from_height(1.7))
+    t = np.arange(15) / 25.0
+    qpos = np.tile(standing_qpos(body), (len(t), 1))
+    qpos[:, 0] += 1.1 * t
+    qpos[:, body.qpos_adr] += 0.3 * np.sin(3 * t[:, None] + np.arange(len(body.qpos_adr)))
+    motion = body_motion(body.xml, qpos)
+    assert len(motion.tree.names) == 17 and {"l_foot", "r_foot"} <= {
+        g.name for g in motion.tree.geoms if g.kind == "box"}
+    pos, clip = _positions_by_name(write_bvh(motion, 25.0, tmp_path / "b.bvh"), motion.tree.names)
+    assert np.abs(pos - motion.pos).max() < 1e-3
+    assert sum(len(c) for c in clip.channels) == 6 + 3 * (len(clip.names) - 1)
+    glb = write_glb(motion, 25.0, tmp_path / "b.glb")
+    assert structural_problems(glb) == []
+    doc, blob = read_glb(glb)
+    nodes, index = animated_world_positions(doc, blob)
+    y_up_to_z_up = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+    back = nodes[:, [index[n] for n in motion.tree.names]] @ y_up_to_z_up.T
+    assert np.abs(back - motion.pos).max() < 1e-3

@@ -149,7 +149,9 @@ def test_every_geom_is_a_mesh_with_outward_normals(glb):
     path, motion, _ = glb
     doc, blob = read_glb(path)
     names = {m["name"] for m in doc["meshes"]}
-    assert {g.name for g in motion.tree.geoms} | {"ground", "step"} <= names
+    assert {"geom_" + g.name for g in motion.tree.geoms} | {"ground", "scene_step"} <= names
+    node_names = [n["name"] for n in doc["nodes"]]
+    assert len(node_names) == len(set(node_names))
     for mesh in doc["meshes"]:
         prim = mesh["primitives"][0]
         v = accessor_array(doc, blob, prim["attributes"]["POSITION"])

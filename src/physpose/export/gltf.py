@@ -88,7 +88,7 @@ def build_gltf(motion: BodyMotion, fps: float) -> tuple[dict, bytes]:
     half = float(np.abs(motion.pos[..., :2] - center).max()) + _GROUND_MARGIN
     nodes[0]["children"].append(mesh_node("ground", *plane_mesh(center, half), _GROUND_RGBA))
     for g in tree.scene:
-        nodes[0]["children"].append(_geom_node(mesh_node, g))
+        nodes[0]["children"].append(_geom_node(mesh_node, g, "scene_"))
 
     local_pos, local_quat = motion.local()
     body_nodes = []
@@ -100,7 +100,7 @@ def build_gltf(motion: BodyMotion, fps: float) -> tuple[dict, bytes]:
         parent = nodes[0] if p < 0 else nodes[body_nodes[p]]
         parent["children"].append(body_nodes[b])
     for g in tree.geoms:
-        nodes[body_nodes[g.body]]["children"].append(_geom_node(mesh_node, g))
+        nodes[body_nodes[g.body]]["children"].append(_geom_node(mesh_node, g, "geom_"))
 
     times = np.arange(motion.num_frames, dtype=float) / fps
     t_acc = buf.add(times, "SCALAR", FLOAT, minmax=True)
@@ -125,8 +125,9 @@ def build_gltf(motion: BodyMotion, fps: float) -> tuple[dict, bytes]:
     return doc, bytes(buf.blob)
 
 
-def _geom_node(mesh_node, g: GeomShape) -> int:
-    return mesh_node(g.name, *geom_mesh(g), g.rgba, g.pos, g.quat)
+def _geom_node(mesh_node, g: GeomShape, prefix: str) -> int:
+    # Prefixed: MuJoCo lets a geom share its body's name, node names should be unique.
+    return mesh_node(prefix + g.name, *geom_mesh(g), g.rgba, g.pos, g.quat)
 
 
 def _xyzw(q_wxyz: np.ndarray) -> np.ndarray:
