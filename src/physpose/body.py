@@ -30,7 +30,7 @@ import numpy as np
 from physpose.errors import PhysposeError
 from physpose.joints import JOINT_NAMES, LANDMARK_NAMES
 from physpose.scene import SceneConfig, add_scene
-from physpose.shape import BodyShape
+from physpose.shape import HEAD_TOP_PER_EAR_WIDTH, BodyShape
 from physpose.skeleton import (AXES, AXIS_VECTORS, DOF_LIMITS, DOF_NAMES, DOF_TORQUE, HINGES,
                                JOINT_POINTS, LANDMARK_SITES, NQ, NUM_DOF, NV, REFERENCE_HEIGHT,
                                REFERENCE_MASS, SEGMENT_NAMES, SEGMENTS, landmark_offsets,
@@ -153,7 +153,7 @@ def _geometry(shape: BodyShape) -> dict[str, list[_GeomPlan]]:
     """Geoms of each segment in its own frame (rest pose), from the shape."""
     s = shape
     t, hw, sw = s.trunk, s.hip_width, s.shoulder_width
-    head_top = 0.88 * s.ear_width
+    head_top = HEAD_TOP_PER_EAR_WIDTH * s.ear_width
     head_lo, head_hi = -0.1 * s.ear_width, max(head_top - s.r_head, 0.0)
     geoms: dict[str, list[_GeomPlan]] = {
         "pelvis": [_capsule("pelvis", s.r_pelvis, (0, -0.3 * hw, 0.1 * t), (0, 0.3 * hw, 0.1 * t)),

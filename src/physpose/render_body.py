@@ -1,12 +1,14 @@
 """A picture of a body in its scene, for people to check the model: PNG via MuJoCo or matplotlib.
 
 MuJoCo's offscreen renderer needs an OpenGL context: run with ``MUJOCO_GL=egl`` (headless GPU
-or Mesa EGL) or ``MUJOCO_GL=osmesa``. When no context can be made, the "auto" backend draws a
-matplotlib 3d projection of the same geoms instead and says so in its result.
+or Mesa EGL) or ``MUJOCO_GL=osmesa``. When neither MUJOCO_GL nor a display is set, or no
+context can be made, the "auto" backend draws a matplotlib 3d projection of the same geoms
+instead and says so in its result.
 """
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,7 +49,9 @@ def render_image(body: Body, qpos: np.ndarray, cfg: RenderConfig = RenderConfig(
     data = mujoco.MjData(body.model)
     data.qpos[:] = qpos
     mujoco.mj_forward(body.model, data)
-    if cfg.backend in ("auto", "mujoco"):
+    # Without MUJOCO_GL or a display MuJoCo would try GLFW, which cannot work headless.
+    gl_possible = bool(os.environ.get("MUJOCO_GL") or os.environ.get("DISPLAY"))
+    if cfg.backend == "mujoco" or (cfg.backend == "auto" and gl_possible):
         try:
             return _render_mujoco(body, data, cfg), "mujoco"
         except (mujoco.FatalError, RuntimeError, AttributeError, ImportError) as err:

@@ -52,7 +52,8 @@ class Box:
                                 remedy="write box:x,y,z,sx,sy,sz[,yaw_deg] with numbers")
         if min(self.size) <= 0:
             raise PhysposeError(f"box sizes must be positive, got {self.size}",
-                                remedy="give full side lengths in metres, e.g. 0.45,0.45,0.45")
+                                remedy="give full side lengths in metres: "
+                                       "box:x,y,z,sx,sy,sz[,yaw_deg]")
 
 
 @dataclass(frozen=True)

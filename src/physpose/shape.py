@@ -32,8 +32,10 @@ _BONE_FRACTION: dict[str, float] = {
     "thigh": 0.245, "shank": 0.246, "ankle_height": 0.039, "foot_length": 0.145,
     "heel_back": 0.035,
 }
-# Vertex of the head above the ear canals, per ear width (0.075 H / 0.085 H).
-HEAD_TOP_PER_EAR_WIDTH = 0.88
+# Vertex of the head above the ear canals (0.075 H, so the standing chain sums to H), per ear
+# width.
+HEAD_TOP_PER_EAR_WIDTH = (1.0 - sum(_BONE_FRACTION[n] for n in (
+    "ankle_height", "shank", "thigh", "trunk", "neck"))) / _BONE_FRACTION["ear_width"]
 
 RADIUS_NAMES: tuple[str, ...] = (
     "pelvis", "abdomen", "chest", "upper_chest", "neck", "head",

@@ -1,0 +1,56 @@
+"""`physpose body`: the MJCF it writes, the picture, and its error messages."""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+import pytest
+
+from physpose.cli import main
+
+
+def test_writes_a_loadable_model(tmp_path, capsys):
+    out = tmp_path / "sub" / "body.xml"
+    assert main(["body", "--height", "1.8", "--mass", "80", "--ground-friction", "0.6",
+                 "--obstacle", "box:-0.5,0,0.225,0.45,0.45,0.45", "--obstacle",
+                 "box:0.8,0,0.1,0.4,1,0.2,15", "--out", str(out)]) == 0
+    assert "48 actuated dof" in capsys.readouterr().out
+    m = mujoco.MjModel.from_xml_path(str(out))
+    assert m.nu == 48 and m.nkey == 1
+    assert m.body_mass.sum() == pytest.approx(80.0, rel=1e-5)
+    floor = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor")
+    assert m.geom_friction[floor, 0] == pytest.approx(0.6)
+    assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "obstacle_1") >= 0
+
+
+def test_trampoline_and_direct_ground(tmp_path):
+    for extra, solref in ((["--trampoline"], None), (["--ground-stiffness", "400",
+                                                      "--ground-damping", "5"], [-400, -5])):
+        out = tmp_path / "b.xml"
+        assert main(["body", "--height", "1.7", *extra, "--out", str(out)]) == 0
+        m = mujoco.MjModel.from_xml_path(str(out))
+        got = m.geom_solref[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, "floor")]
+        assert got[0] < 0 and (solref is None or np.allclose(got, solref))
+
+
+def test_png(tmp_path):
+    png = tmp_path / "body.png"
+    assert main(["body", "--height", "1.6", "--out", str(tmp_path / "b.xml"), "--png",
+                 str(png)]) == 0
+    import matplotlib.image
+    image = matplotlib.image.imread(png)
+    assert image.shape[0] > 100 and image[..., :3].std() > 0.05  # a picture, not a blank
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--height", "3"], "--height 3 m is outside 0.5-2.5 m"),
+    (["--height", "1.7", "--mass", "10"], "--mass 10 kg is outside 20-300 kg"),
+    (["--height", "1.7", "--obstacle", "box:1,2"], "--obstacle #1"),
+    (["--height", "1.7", "--ground-friction", "-1"], "--ground-friction"),
+    (["--height", "1.7", "--ground-stiffness", "0"], "stiffness"),
+])
+def test_errors_name_the_argument(tmp_path, capsys, args, message):
+    assert main(["body", *args, "--out", str(tmp_path / "b.xml")]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not (tmp_path / "b.xml").exists()
