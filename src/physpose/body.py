@@ -260,13 +260,22 @@ def build_body(shape: BodyShape, scene: SceneConfig = SceneConfig(),
                                    rgba=[0.1, 0.3, 0.9, 1.0], group=4)
     for a, b in EXCLUDED_PAIRS:
         spec.add_exclude(name=f"exclude_{a}_{b}", bodyname1=a, bodyname2=b)
+    actuators = []
     for k, dof in enumerate(DOF_NAMES):
         act = spec.add_actuator(name=dof, target=dof, trntype=mujoco.mjtTrn.mjTRN_JOINT)
         act.set_to_position(kp=float(limits[k] / config.saturation_angle),
                             dampratio=config.dampratio)
         act.forcelimited = True
         act.forcerange = [-float(limits[k]), float(limits[k])]
+        actuators.append(act)
     model = _compile(spec)
+    # Move the servo damping (kv, from the damping ratio) out of the force-limited term into
+    # the actuator's own unclamped damping: a clamped kv vanishes exactly when velocities are
+    # high while implicitfast still integrates it, and violent targets then blew up.
+    kv = -model.actuator_biasprm[:NUM_DOF, 2]
+    for act, d in zip(actuators, kv):
+        act.biasprm[2] = 0.0
+        act.damping = [float(d), 0.0, 0.0]
     stand = _standing(model)
     spec.add_key(name="standing", qpos=stand.tolist(), ctrl=stand[7:].tolist())
     return _index(shape, scene, config, spec, _compile(spec), masses, limits)
@@ -308,7 +317,7 @@ def _index(shape, scene, config, spec, model, masses, limits) -> Body:
         foot_geom_ids={s: mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, f"{s}_foot")
                        for s in ("l", "r")},
         kp=model.actuator_gainprm[:NUM_DOF, 0].copy(),
-        kv=-model.actuator_biasprm[:NUM_DOF, 2].copy(),
+        kv=model.actuator_damping[:NUM_DOF].copy(),
         torque_limit=np.asarray(limits, dtype=float).copy(),
         segment_masses=dict(masses), total_mass=float(model.body_subtreemass[1]),
     )
