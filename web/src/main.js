@@ -27,15 +27,34 @@ scene.add(sun);
 
 const center = new THREE.Vector3(...data.center);
 const extent = Math.max(2, data.extent);
-const grid = new THREE.GridHelper(Math.ceil(extent * 2 + 4), Math.ceil(extent * 2 + 4), 0x8893a0, 0xc3c9d1);
-grid.rotation.x = Math.PI / 2;
-grid.position.set(center.x, center.y, 0);
-scene.add(grid);
+const groundSize = 2 * Math.ceil(extent + 10);  // m, reaches past the view's horizon
+// The ground: a plane with a 1 m / 0.5 m grid texture (textured triangles rather than long
+// lines, which some software renderers drop when they cross the camera plane).
+function gridTexture() {
+  const c = document.createElement("canvas");
+  c.width = c.height = 256;
+  const g = c.getContext("2d");
+  g.fillStyle = "#e6e9ed";
+  g.fillRect(0, 0, 256, 256);
+  g.fillStyle = "#b4bcc6";
+  g.fillRect(126, 0, 4, 256);
+  g.fillRect(0, 126, 256, 4);
+  g.fillStyle = "#7d8794";
+  g.fillRect(0, 0, 256, 5);
+  g.fillRect(0, 0, 5, 256);
+  const tex = new THREE.CanvasTexture(c);
+  tex.wrapS = tex.wrapT = THREE.RepeatWrapping;
+  tex.repeat.set(groundSize, groundSize);
+  tex.anisotropy = renderer.capabilities.getMaxAnisotropy();
+  tex.colorSpace = THREE.SRGBColorSpace;
+  return tex;
+}
 const floor = new THREE.Mesh(
-  new THREE.PlaneGeometry(extent * 2 + 4, extent * 2 + 4),
-  new THREE.MeshLambertMaterial({ color: 0xdfe3e8, side: THREE.DoubleSide }),
+  new THREE.PlaneGeometry(groundSize, groundSize),
+  new THREE.MeshLambertMaterial({ map: gridTexture(), side: THREE.DoubleSide }),
 );
-floor.position.set(center.x, center.y, -0.002);
+// Whole metres stay on grid lines: the texture repeats every metre from the plane's corner.
+floor.position.set(Math.round(center.x), Math.round(center.y), 0);
 scene.add(floor);
 
 camera.position.set(center.x + 2.2, center.y - 3.6, 1.9);

@@ -25,7 +25,7 @@ from physpose.render.bodymotion import BodyMotion, reconstruction_motion
 from physpose.render.draw import (draw_grid, draw_ground_disc, draw_skeleton, draw_solids,
                                   geom_samples, look_at)
 from physpose.render.result import available_motions, joints_of, load_result
-from physpose.render.skeleton import FEET, edge_indices, foot_contacts, foot_heights
+from physpose.render.skeleton import edge_indices, foot_contacts, lowest_foot_points
 
 DEFAULT_NAME = "overlay.mp4"
 COLORS = {"kinematic": (36, 138, 240), "physics": (214, 111, 47)}  # BGR: orange, blue
@@ -41,9 +41,9 @@ class OverlayConfig:
 
     height: int = 540                # px, height of both panels
     solids: bool = True              # draw the capsule body (when stored), not only the skeleton
-    view_azimuth_deg: float = 75.0   # second view, around z from the video camera's direction
+    view_azimuth_deg: float = -60.0  # second view, around z from the video camera's direction
     view_elevation_deg: float = 18.0
-    view_distance: float = 4.0       # m from the pelvis
+    view_distance: float = 3.3       # m from the pelvis
     grid_step: float = 0.5           # m
     grid_extent: float = 4.0         # m around the pelvis
 
@@ -69,14 +69,12 @@ class _Scene:
 def _scene(rec: Reconstruction, image_size: tuple[int, int]) -> _Scene:
     motions = available_motions(rec)
     bodies = {m: reconstruction_motion(rec, m) for m in motions}
-    index = {n: i for i, n in enumerate(rec.joint_names)}
+    feet = {m: lowest_foot_points(joints_of(rec, m), rec.joint_names) for m in motions}
     return _Scene(
         rec=rec, motions=motions, bodies=bodies,
         samples={m: [geom_samples(g) for g in b.tree.geoms] for m, b in bodies.items() if b},
-        contacts={m: foot_contacts(foot_heights(joints_of(rec, m), rec.joint_names))
-                  for m in motions},
-        feet_xy={m: np.stack([joints_of(rec, m)[:, [index[n] for n in names], :2].mean(axis=1)
-                              for names in FEET.values()], axis=1) for m in motions},
+        contacts={m: foot_contacts(f[..., 2]) for m, f in feet.items()},
+        feet_xy={m: f[..., :2] for m, f in feet.items()},
         edges=edge_indices(rec.joint_names), image_size=image_size)
 
 
@@ -146,7 +144,7 @@ def _view_panel(scene: _Scene, t: int, cfg: OverlayConfig) -> np.ndarray:
 
 def _legend(image: np.ndarray, scene: _Scene, t: int) -> None:
     rows = [(m, COLORS[m]) for m in scene.motions] + [("foot contact", CONTACT_COLOR)]
-    cv2.rectangle(image, (6, 6), (178, 30 + 20 * len(rows)), (255, 255, 255), -1)
+    cv2.rectangle(image, (6, 6), (196, 30 + 20 * len(rows)), (255, 255, 255), -1)
     cv2.putText(image, f"t = {t / scene.rec.fps:5.2f} s  frame {t + 1}", (12, 24),
                 cv2.FONT_HERSHEY_SIMPLEX, 0.45, (30, 30, 30), 1, cv2.LINE_AA)
     for i, (name, color) in enumerate(rows):

@@ -30,14 +30,24 @@ def edge_indices(joint_names: tuple[str, ...] = JOINT_NAMES) -> np.ndarray:
                     dtype=int).reshape(-1, 2)
 
 
-def foot_heights(joints: np.ndarray, joint_names: tuple[str, ...] = JOINT_NAMES) -> np.ndarray:
-    """Height above the ground (z = 0) of each foot's lowest joint.
+def lowest_foot_points(joints: np.ndarray,
+                       joint_names: tuple[str, ...] = JOINT_NAMES) -> np.ndarray:
+    """The lowest joint of each foot (heel or toe): where it meets the ground.
 
-    joints: (T, J, 3) world, metres -> (T, 2) metres, columns (left, right).
+    joints: (T, J, 3) world, metres -> (T, 2, 3), feet in FEET order (left, right).
     """
     index = {n: i for i, n in enumerate(joint_names)}
-    cols = [joints[:, [index[n] for n in names], 2].min(axis=1) for names in FEET.values()]
-    return np.stack(cols, axis=1)
+    feet = []
+    for names in FEET.values():
+        pts = joints[:, [index[n] for n in names]]                 # (T, k, 3)
+        low = np.argmin(pts[..., 2], axis=1)
+        feet.append(pts[np.arange(len(pts)), low])
+    return np.stack(feet, axis=1)
+
+
+def foot_heights(joints: np.ndarray, joint_names: tuple[str, ...] = JOINT_NAMES) -> np.ndarray:
+    """Height above the ground (z = 0) of each foot's lowest joint: (T, J, 3) -> (T, 2) m."""
+    return lowest_foot_points(joints, joint_names)[..., 2]
 
 
 def foot_contacts(heights: np.ndarray, threshold: float = CONTACT_HEIGHT) -> np.ndarray:

@@ -10,7 +10,8 @@ import numpy as np
 from physpose.reconstruction import Reconstruction
 from physpose.render.bodymotion import BodyMotion, GeomShape, reconstruction_motion
 from physpose.render.result import available_motions, joints_of
-from physpose.render.skeleton import FEET, edge_indices, foot_contacts, foot_heights
+from physpose.render.skeleton import (FEET, edge_indices, foot_contacts, foot_heights,
+                                      lowest_foot_points)
 
 _DECIMALS = 4  # metres: 0.1 mm in the page's data
 # Plot colours per (motion, foot); the viewer uses the same blue/orange per motion.
@@ -36,16 +37,13 @@ def report_data(rec: Reconstruction, title: str = "physpose result") -> dict:
         joints = joints_of(rec, name)
         body = reconstruction_motion(rec, name)
         bodies[name] = body
-        heights = foot_heights(joints, rec.joint_names)
-        index = {n: i for i, n in enumerate(rec.joint_names)}
-        feet_xy = np.stack([joints[:, [index[n] for n in names], :2].mean(axis=1)
-                            for names in FEET.values()], axis=1)          # (T, 2, 2)
+        feet = lowest_foot_points(joints, rec.joint_names)               # (T, 2, 3)
         motions[name] = {
             "joints": _r(joints),
             "body_pos": None if body is None else _r(body.pos),
             "body_quat": None if body is None else _r(body.quat),
-            "feet_xy": np.round(feet_xy, _DECIMALS).reshape(-1, 2).tolist(),
-            "contacts": foot_contacts(heights).astype(int).reshape(-1).tolist(),
+            "feet_xy": np.round(feet[..., :2], _DECIMALS).reshape(-1, 2).tolist(),
+            "contacts": foot_contacts(feet[..., 2]).astype(int).reshape(-1).tolist(),
         }
     tree = next((b.tree for b in bodies.values() if b is not None), None)
     best = "physics" if rec.has_physics else "kinematic"
