@@ -9,15 +9,16 @@ import numpy as np
 import pytest
 from body_fixtures import SCENES, SHAPES, dof, simulate, standing
 
-from physpose.body import (EXCLUDED_PAIRS, SEGMENT_MASS_PERCENT, BodyConfig, _self_contacts,
+from physpose.body import (EXCLUDED_PAIRS, SEGMENT_MASS_PERCENT, BodyConfig, self_contacts,
                            build_body, segment_masses, standing_qpos)
 from physpose.errors import PhysposeError
 from physpose.skeleton import DOF_NAMES, SEGMENT_NAMES, SEGMENTS
 
 CASES = list(itertools.product(sorted(SHAPES), sorted(SCENES)))
-_OBJECTS = {"body": (mujoco.mjtObj.mjOBJ_BODY, "nbody"), "joint": (mujoco.mjtObj.mjOBJ_JOINT, "njnt"),
-            "geom": (mujoco.mjtObj.mjOBJ_GEOM, "ngeom"), "site": (mujoco.mjtObj.mjOBJ_SITE, "nsite"),
-            "actuator": (mujoco.mjtObj.mjOBJ_ACTUATOR, "nu")}
+_OBJ = mujoco.mjtObj
+_OBJECTS = {"body": (_OBJ.mjOBJ_BODY, "nbody"), "joint": (_OBJ.mjOBJ_JOINT, "njnt"),
+            "geom": (_OBJ.mjOBJ_GEOM, "ngeom"), "site": (_OBJ.mjOBJ_SITE, "nsite"),
+            "actuator": (_OBJ.mjOBJ_ACTUATOR, "nu")}
 
 
 def _upright(body, data) -> float:
@@ -86,7 +87,7 @@ def test_standing_pose_has_feet_on_the_ground_and_no_self_contact(shape_name):
     data = mujoco.MjData(body.model)
     data.qpos[:] = q
     mujoco.mj_forward(body.model, data)
-    assert _self_contacts(body.model, data) == []
+    assert self_contacts(body.model, data) == []
     feet = [body.foot_geom_ids["l"], body.foot_geom_ids["r"]]
     lowest = [float(np.min(data.geom_xpos[g][2] - np.abs(
         data.geom_xmat[g].reshape(3, 3)[2]) @ body.model.geom_size[g])) for g in feet]
@@ -120,7 +121,6 @@ def test_dropped_from_1_m_gives_finite_states(shape_name, scene_name):
 
 
 def test_same_inputs_give_bit_identical_trajectories():
-    rng = np.random.default_rng(0)
     runs = []
     for _ in range(2):
         body, q = standing("light", "chair")
@@ -136,7 +136,6 @@ def test_same_inputs_give_bit_identical_trajectories():
         runs.append(np.array(out))
     assert np.array_equal(runs[0], runs[1])
     assert np.abs(runs[0][-1] - runs[0][0]).max() > 0.05  # it did move
-    del rng
 
 
 def test_xml_round_trip():
@@ -156,13 +155,13 @@ def test_self_collision_between_non_adjacent_segments():
     q[dof("l_hip_x")] = -0.5  # left leg adducted across the right one
     data.qpos[:] = q
     mujoco.mj_forward(m, data)
-    assert ("l_thigh", "r_thigh") in _self_contacts(m, data) or \
-        ("r_thigh", "l_thigh") in _self_contacts(m, data)
+    assert ("l_thigh", "r_thigh") in self_contacts(m, data) or \
+        ("r_thigh", "l_thigh") in self_contacts(m, data)
     off = build_body(SHAPES["tall"], config=BodyConfig(self_collision=False))
     data2 = mujoco.MjData(off.model)
     data2.qpos[:] = q
     mujoco.mj_forward(off.model, data2)
-    assert _self_contacts(off.model, data2) == []
+    assert self_contacts(off.model, data2) == []
     assert len(EXCLUDED_PAIRS) == m.nexclude
 
 

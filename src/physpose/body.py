@@ -31,7 +31,7 @@ from physpose.errors import PhysposeError
 from physpose.joints import JOINT_NAMES, LANDMARK_NAMES
 from physpose.scene import SceneConfig, add_scene
 from physpose.shape import HEAD_TOP_PER_EAR_WIDTH, BodyShape
-from physpose.skeleton import (AXES, AXIS_VECTORS, DOF_LIMITS, DOF_NAMES, DOF_TORQUE, HINGES,
+from physpose.skeleton import (AXES, AXIS_VECTORS, DOF_LIMITS, DOF_NAMES, DOF_TORQUE,
                                JOINT_POINTS, LANDMARK_SITES, NQ, NUM_DOF, NV, REFERENCE_HEIGHT,
                                REFERENCE_MASS, SEGMENT_NAMES, SEGMENTS, landmark_offsets,
                                segment_offsets)
@@ -351,7 +351,7 @@ def _standing(model: mujoco.MjModel, xy: tuple[float, float] = (0.0, 0.0), yaw: 
         for side, sign in (("l", 1.0), ("r", -1.0)):
             q[7 + DOF_NAMES.index(f"{side}_shoulder_x")] = sign * math.radians(deg)
         _place_on_ground(model, data, q, xy)
-        if arm_abduction is not None or not _self_contacts(model, data):
+        if arm_abduction is not None or not self_contacts(model, data):
             break
     return q
 
@@ -376,8 +376,8 @@ def _box_lowest_z(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> floa
     return float(world[:, 2].min())
 
 
-def _self_contacts(model: mujoco.MjModel, data: mujoco.MjData) -> list[tuple[str, str]]:
-    """Pairs of body geoms in contact (scene geoms excluded), after mj_forward."""
+def self_contacts(model: mujoco.MjModel, data: mujoco.MjData) -> list[tuple[str, str]]:
+    """Names of body geoms touching each other (scene geoms left out), after mj_forward."""
     pairs = []
     for c in data.contact[: data.ncon]:
         if model.geom_bodyid[c.geom1] > 0 and model.geom_bodyid[c.geom2] > 0:

@@ -55,7 +55,7 @@ def angles_from_matrices(rot):
 
 
 def matrix_from_quat(quat):
-    """Rotation matrices from quaternions (w, x, y, z), normalised first: (..., 4) -> (..., 3, 3)."""
+    """Rotations from quaternions (w, x, y, z), normalised first: (..., 4) -> (..., 3, 3)."""
     xp = _xp(quat)
     q = quat / xp.linalg.norm(quat, axis=-1, keepdims=True)
     w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]

@@ -119,7 +119,8 @@ def trampoline(base: SceneConfig = SceneConfig()) -> SceneConfig:
 def parse_obstacle(text: str) -> Box:
     """Parse ``box:x,y,z,sx,sy,sz[,yaw_deg]`` (centre and full sizes in metres, yaw in degrees).
 
-    Example: a chair seat 45 cm high behind a person at the origin: ``box:-0.35,0,0.225,0.45,0.45,0.45``.
+    Example, a 45 cm chair seat behind a person at the origin:
+    ``box:-0.35,0,0.225,0.45,0.45,0.45``.
     """
     remedy = "write box:x,y,z,sx,sy,sz[,yaw_deg] (centre and full sizes in metres)"
     kind, sep, rest = text.partition(":")
@@ -141,6 +142,9 @@ def parse_obstacle(text: str) -> Box:
 def add_scene(spec: mujoco.MjSpec, scene: SceneConfig) -> None:
     """Add the ground plane ("floor"), obstacles ("obstacle_<i>"), light and gravity to a spec."""
     spec.option.gravity = [0.0, 0.0, -scene.gravity]
+    spec.add_texture(name="sky", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
+                     builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT, width=256, height=256,
+                     rgb1=[0.75, 0.85, 0.95], rgb2=[0.35, 0.45, 0.6])
     tex = spec.add_texture(name="grid", type=mujoco.mjtTexture.mjTEXTURE_2D,
                            builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, width=256, height=256,
                            rgb1=[0.82, 0.84, 0.86], rgb2=[0.62, 0.65, 0.68])

@@ -96,12 +96,18 @@ def _mirror(limits: tuple[tuple[float, float], ...]) -> tuple[tuple[float, float
 # extension, knee flexion, elbow extension, ankle plantarflexion, wrist ulnar deviation as the
 # palm faces medially), +x = towards the person's left = outwards (abduction, ankle eversion,
 # wrist extension), +z = front turned outwards (external rotation, forearm supination).
-_HIP = ((-120.0, 30.0), (-30.0, 45.0), (-40.0, 45.0))      # flex 120 / ext 30, add 30 / abd 45, int 40 / ext 45
-_KNEE = ((-5.0, 150.0), (-5.0, 5.0), (-20.0, 20.0))        # flexion 150, varus/valgus +-5, tibial rotation +-20
-_ANKLE = ((-25.0, 50.0), (-35.0, 20.0), (-30.0, 30.0))     # dorsi 25 / plantar 50, inversion 35 / eversion 20, add/abd 30
-_SHOULDER = ((-180.0, 60.0), (-40.0, 180.0), (-70.0, 90.0))  # flex 180 / ext 60, add 40 / abd 180, int 70 / ext 90
-_ELBOW = ((-150.0, 5.0), (-5.0, 5.0), (-85.0, 85.0))       # flexion 150, carrying angle +-5, pronation/supination 85
-_WRIST = ((-20.0, 30.0), (-80.0, 70.0), (-15.0, 15.0))     # radial 20 / ulnar 30, flex 80 / ext 70
+# hip: flexion 120 / extension 30, adduction 30 / abduction 45, internal 40 / external 45
+_HIP = ((-120.0, 30.0), (-30.0, 45.0), (-40.0, 45.0))
+# knee: flexion 150, varus/valgus 5, tibial rotation 20
+_KNEE = ((-5.0, 150.0), (-5.0, 5.0), (-20.0, 20.0))
+# ankle: dorsiflexion 25 / plantarflexion 50, inversion 35 / eversion 20, adduction 30
+_ANKLE = ((-25.0, 50.0), (-35.0, 20.0), (-30.0, 30.0))
+# shoulder: flexion 180 / extension 60, adduction 40 / abduction 180, internal 70 / external 90
+_SHOULDER = ((-180.0, 60.0), (-40.0, 180.0), (-70.0, 90.0))
+# elbow: flexion 150, carrying angle 5, pronation/supination 85 from mid-position
+_ELBOW = ((-150.0, 5.0), (-5.0, 5.0), (-85.0, 85.0))
+# wrist: radial 20 / ulnar 30 deviation, flexion 80 / extension 70, twist 15
+_WRIST = ((-20.0, 30.0), (-80.0, 70.0), (-15.0, 15.0))
 # Trunk: +y = flexion (forward), +x = lateral bend to the right, +z = rotation to the left.
 _SPINE = ((-25.0, 50.0), (-25.0, 25.0), (-20.0, 20.0))     # lumbar share of thoracolumbar ROM
 _THORAX = ((-20.0, 30.0), (-20.0, 20.0), (-35.0, 35.0))    # thoracic share
