@@ -58,7 +58,7 @@ class MocapClip:
     hand_rot: np.ndarray            # (T, 2, 3, 3) [l, r]; columns: wrist->fingers, ->thumb, x cross y
     source_fps: float               # Hz, the file's own rate
     floor_offset: float             # m, file floor height (z up) that was subtracted
-    meta: dict = field(default_factory=dict)
+    meta: dict = field(default_factory=dict)  # source_frames, source_duration (s)
 
     def __post_init__(self) -> None:
         t = self.joints.shape[0]
@@ -143,7 +143,8 @@ def finish_clip(motion: SkeletonMotion, target_fps: float | None) -> MocapClip:
     hand_rot = orthonormalize(resample(times, hand_rot, new_t))
     return MocapClip(name=motion.name, source=motion.source, fps=fps, joints=joints,
                      head_top=head_top, head_rot=head_rot, hand_rot=hand_rot,
-                     source_fps=source_fps, floor_offset=floor)
+                     source_fps=source_fps, floor_offset=floor,
+                     meta={"source_frames": len(times), "source_duration": float(times[-1])})
 
 
 def estimate_floor(points: dict[str, np.ndarray], times: np.ndarray) -> float:

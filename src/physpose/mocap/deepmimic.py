@@ -98,6 +98,12 @@ def load_deepmimic(path: str | Path, target_fps: float | None = 25.0,
         raise PhysposeError("non-finite values", path=path,
                             frame=int(np.argmax(~np.isfinite(data).all(1))), remedy=_REMEDY)
     times = np.concatenate([[0.0], np.cumsum(data[:-1, 0])])
+    pos, rot = _forward_kinematics(joints, data)
+    return finish_clip(_motion(path, char_path, times, joints, bodies, pos, rot), target_fps)
+
+
+def _forward_kinematics(joints: list[dict], data: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Joint positions (T, N, 3) and global rotations (T, N, 3, 3) of frame rows (T, width)."""
     t = len(data)
     pos = np.zeros((t, len(joints), 3))
     rot = np.zeros((t, len(joints), 3, 3))
@@ -113,7 +119,20 @@ def load_deepmimic(path: str | Path, target_fps: float | None = 25.0,
         p = j["Parent"]
         pos[:, k] = pos[:, p] + rot[:, p] @ attach
         rot[:, k] = rot[:, p] @ local
-    return finish_clip(_motion(path, char_path, times, joints, bodies, pos, rot), target_fps)
+    return pos, rot
+
+
+def character_stature(character: str | Path) -> float:
+    """Standing height (m) of a DeepMimic character in its zero pose: foot-box bottom to head top."""
+    character = Path(character)
+    joints, bodies = _character(character)
+    row = [0.0] * 8
+    row[4] = 1.0  # identity root quaternion
+    for j in joints[1:]:
+        row += [1.0, 0.0, 0.0, 0.0] if j["Type"] == "spherical" else [0.0] * _DOF[j["Type"]]
+    pos, rot = _forward_kinematics(joints, np.array([row, row]))
+    motion = _motion(character, character, np.array([0.0, 1.0]), joints, bodies, pos, rot)
+    return float(motion.points["head_top"][0, 1] - motion.points["l_heel"][0, 1])
 
 
 def _motion(path, char_path, times, joints, bodies, pos, rot) -> SkeletonMotion:

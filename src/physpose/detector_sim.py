@@ -1,0 +1,334 @@
+"""Detector simulator: ground-truth motion -> `Observations` as the observe stage makes from video.
+
+A static virtual pinhole camera looks at the subject's mean position; MediaPipe's 33 landmarks
+are synthesised from the ground-truth skeleton (`synthesize_landmarks`), projected to pixels with
+noise in proportion to the person's size in the image, given confidences that drop for far-side
+and torso-occluded landmarks, and corrupted by occasional outliers and left/right swaps (legs,
+arms or the whole body); hip-centred world landmarks in camera axes get noise that is larger
+along the viewing direction, and per clip a scale error, a depth compression and a lean towards
+or away from the camera. Same config and seed -> bit-identical output.
+
+The default noise figures are in the constant block below, calibrated against real MediaPipe
+error measured on the multi-view reference (docs/mediapipe_error.md); each says where it comes
+from. Masks are not simulated (`Observations.masks` is None).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from physpose.joints import JOINT_INDEX, LANDMARK_INDEX, LANDMARK_NAMES, NUM_LANDMARKS
+from physpose.metrics import project, transform_points
+from physpose.mocap.common import MocapClip, body_height
+from physpose.mocap.rotations import axis_rotation
+from physpose.observations import Observations
+
+# --- Default noise model -------------------------------------------------------------------
+# Measured on real MediaPipe (docs/mediapipe_error.md: the pose2sim demo, 4 views x 50 frames,
+# leave-one-out multi-view reference; "pooled" = all views, "good views" = cam01/03/04). Before
+# that measurement the priors were: 2d sigma ~5 px at 1080p, 3d mean error 50-70 mm, depth sigma
+# ~2x lateral. Re-run the measurement and update these when the reference improves.
+#
+# 2d, per coordinate, as a fraction of the person's size in the image (the long side of its 2d
+# bounding box): MediaPipe works on a crop around the person, so its error scales with the
+# person, not the frame. Measured: white 4.2 px and robust total 15.1 px for a 738 px tall
+# person (0.57 %, 2.05 %); the in-sample median (13.6 px) implies ~1.6 %, and the leave-one-out
+# figure is inflated by the three-view reference's own error, so the target total is 1.8 %.
+# The base sigmas below are for unhidden landmarks; with the far-side/occlusion gains the
+# simulator's robust total comes out at 1.75 % (measured as in docs/mediapipe_error.md).
+SIGMA_2D_WHITE = 0.004         # x person size, frame-to-frame part
+SIGMA_2D_DRIFT = 0.0125        # x person size, slowly varying part
+# 3d world landmarks (hip-centred, camera axes). Measured, good views (cam01/03/04): 33-landmark
+# mean error 125-178 mm (median 90-157), MPJPE 102-130 mm / MPJPE-PA 68-84 mm on the 21 joints,
+# RMS per axis ~42 / 52 / 161 mm (x / y / z), scale (RMS radius ratio) 0.93-0.96, depth scale
+# 0.51-0.75 (pooled 0.61), depth bias -40..+112 mm (a forward/backward lean). Simulated with
+# these defaults, without swaps, on the 15 shared clips at 4 azimuths: mean 135 mm, median 119,
+# MPJPE 129, MPJPE-PA 93, RMS 37 / 54 / 141 mm, scale 0.95, depth scale 0.60.
+SIGMA_3D_WHITE = 0.011         # m per lateral axis (camera x, y)
+SIGMA_3D_DRIFT = 0.024         # m per lateral axis, correlated over DRIFT_TIME
+DEPTH_NOISE_RATIO = 2.5        # depth (camera z) sigma / lateral sigma
+SCALE_BIAS_MEAN = 1.0          # per-clip multiplicative scale (the depth compression below
+SCALE_BIAS_SIGMA = 0.03        # already brings the RMS-radius ratio to the measured 0.95)
+DEPTH_SCALE_MEAN = 0.62        # per-clip factor on hip-relative depth: monocular 3d flattens it
+DEPTH_SCALE_SIGMA = 0.09
+LEAN_BIAS_SIGMA_DEG = 8.0      # per-clip tilt towards/away from the camera about the hips
+DRIFT_TIME = 0.5               # s, correlation time of the drifting parts (not measured)
+# Outliers and swaps. Measured: 8.2 % of landmark-frames off by > 5 % of the image height
+# (13 % of the person's height) pooled, 2.8-6.5 % in the views without swaps; whole-body
+# left/right swaps in 6.5 % of the frames pooled (all in one view, 26 %).
+OUTLIER_RATE = 0.04            # per landmark-frame: a jump by OUTLIER_OFFSET, confident
+OUTLIER_OFFSET = (0.13, 0.40)  # x person size, range of the jump
+OUTLIER_CONFIDENCE = (0.5, 0.8)
+SWAP_RATE = 0.02               # per frame: a swap of the legs, the arms or the whole body starts
+SWAP_FRAMES = (2, 8)           # its length, frames (inclusive range): legs swapped ~6.5 % of frames
+# Confidence ("visibility") model.
+BASE_CONFIDENCE = {"face": 0.98, "trunk": 0.99, "limb": 0.95, "distal": 0.90, "extremity": 0.85}
+CONFIDENCE_JITTER = 0.03       # sigma of per-frame confidence noise
+FAR_SIDE_DEPTH = 0.25          # m, far-side weight = clip(depth behind the partner / this, 0, 1)
+FAR_SIDE_DROP = 0.35           # confidence lost by a fully far-side landmark
+OCCLUDED_DROP = 0.45           # confidence lost behind the torso
+OCCLUDED_MARGIN = 0.05         # m, behind the torso plane by more than this counts as occluded
+FAR_NOISE_GAIN = 1.0           # 2d/3d sigma x (1 + gain * far-side weight)
+OCCLUDED_NOISE_GAIN = 1.5      # 2d/3d sigma x (1 + gain) when occluded
+OUTSIDE_CONFIDENCE = 0.05      # landmarks outside the image
+# --- Anthropometric offsets for landmarks the skeleton lacks (adult, stature 1.70 m) ----------
+REFERENCE_STATURE = 1.70       # m; offsets below scale with the clip's body height
+# Head frame (forward, left, up) from the point between the ears: head breadth ~15 cm, eye
+# separation ~63 mm, ear canal to nose tip ~10 cm, eyes ~1.5 cm above and mouth ~6 cm below it.
+FACE_OFFSETS = {
+    "nose": (0.105, 0.0, -0.02),
+    "left_eye_inner": (0.090, 0.016, 0.015), "left_eye": (0.085, 0.032, 0.015),
+    "left_eye_outer": (0.075, 0.048, 0.015),
+    "right_eye_inner": (0.090, -0.016, 0.015), "right_eye": (0.085, -0.032, 0.015),
+    "right_eye_outer": (0.075, -0.048, 0.015),
+    "left_ear": (0.0, 0.075, 0.0), "right_ear": (0.0, -0.075, 0.0),
+    "mouth_left": (0.090, 0.025, -0.06), "mouth_right": (0.090, -0.025, -0.06),
+}
+# Hand frame (wrist->fingers, ->thumb, normal): MediaPipe's pinky/index/thumb points are the
+# knuckles; hand length ~19 cm, wrist to index knuckle ~9 cm, knuckle row ~8 cm wide.
+HAND_OFFSETS = {"index": (0.090, 0.020, 0.0), "pinky": (0.080, -0.025, 0.0),
+                "thumb": (0.050, 0.040, 0.0)}
+# Landmarks equal to a ground-truth joint.
+DIRECT = {f"{side}_{part}": f"{side[0]}_{joint}" for side in ("left", "right") for part, joint in (
+    ("shoulder", "shoulder"), ("elbow", "elbow"), ("wrist", "wrist"), ("hip", "hip"),
+    ("knee", "knee"), ("ankle", "ankle"), ("heel", "heel"), ("foot_index", "toe"))}
+_GROUP = {"face": tuple(FACE_OFFSETS), "trunk": ("shoulder", "hip"),
+          "limb": ("elbow", "knee"), "distal": ("wrist", "ankle"),
+          "extremity": ("pinky", "index", "thumb", "heel", "foot_index")}
+_SWAP_PARTS = {"legs": ("knee", "ankle", "heel", "foot_index"),
+               "arms": ("elbow", "wrist", "pinky", "index", "thumb"),
+               "body": tuple(n[5:] for n in LANDMARK_NAMES if n.startswith("left_"))}
+
+
+@dataclass(frozen=True)
+class DetectorSimConfig:
+    """Virtual camera and detector noise. Angles in degrees, lengths in metres, 2d noise as a
+    fraction of the person's size in the image (defaults and their sources: constants above)."""
+
+    distance: float | None = None   # m, horizontal camera-subject distance; None: fit the motion
+    height: float = 1.3             # m, camera centre above the ground
+    azimuth_deg: float = 30.0       # 0: in front of the subject, 90: at its left side
+    fov_deg: float = 60.0           # horizontal field of view
+    image_size: tuple[int, int] = (1920, 1080)  # (width, height), px
+    sigma_2d_white: float = SIGMA_2D_WHITE
+    sigma_2d_drift: float = SIGMA_2D_DRIFT
+    sigma_3d_white: float = SIGMA_3D_WHITE
+    sigma_3d_drift: float = SIGMA_3D_DRIFT
+    depth_noise_ratio: float = DEPTH_NOISE_RATIO
+    scale_bias_mean: float = SCALE_BIAS_MEAN
+    scale_bias_sigma: float = SCALE_BIAS_SIGMA
+    depth_scale_mean: float = DEPTH_SCALE_MEAN
+    depth_scale_sigma: float = DEPTH_SCALE_SIGMA
+    lean_bias_sigma_deg: float = LEAN_BIAS_SIGMA_DEG
+    drift_time: float = DRIFT_TIME
+    outlier_rate: float = OUTLIER_RATE
+    swap_rate: float = SWAP_RATE
+    known_intrinsics: bool = False  # put K into the Observations (a calibrated camera)
+    seed: int = 0
+
+
+@dataclass(frozen=True, eq=False)
+class SimulatedCapture:
+    """What the simulator made, with the truth it was made from."""
+
+    observations: Observations
+    camera_K: np.ndarray             # (3, 3)
+    camera_T_world2cam: np.ndarray   # (4, 4)
+    joints: np.ndarray               # (T, 21, 3) ground-truth joints, world, m
+    landmarks: np.ndarray            # (T, 33, 3) ground-truth landmarks, world, m
+    landmarks2d: np.ndarray          # (T, 33, 2) their noise-free projections, px
+    world_landmarks: np.ndarray      # (T, 33, 3) noise-free hip-centred landmarks, camera axes, m
+    outliers: np.ndarray             # (T, 33) bool, landmark replaced by an outlier
+    swapped: np.ndarray              # (T, 33) bool, landmark exchanged with its left/right twin
+
+
+def synthesize_landmarks(clip: MocapClip) -> np.ndarray:
+    """MediaPipe's 33 landmarks from the ground truth, world frame. -> (T, 33, 3) m
+
+    Joints observed directly are copied (so `joints_from_landmarks` returns the clip's joints);
+    face points come from the head frame, hand points from the hand frames (offsets above,
+    scaled by body height / REFERENCE_STATURE).
+    """
+    scale = body_height(clip) / REFERENCE_STATURE
+    out = np.zeros((clip.num_frames, NUM_LANDMARKS, 3))
+    for name, joint in DIRECT.items():
+        out[:, LANDMARK_INDEX[name]] = clip.joints[:, JOINT_INDEX[joint]]
+    head = clip.joints[:, JOINT_INDEX["head"]]
+    for name, offset in FACE_OFFSETS.items():
+        out[:, LANDMARK_INDEX[name]] = head + scale * clip.head_rot @ np.asarray(offset)
+    for k, side in enumerate(("left", "right")):
+        wrist = clip.joints[:, JOINT_INDEX[f"{side[0]}_wrist"]]
+        for part, offset in HAND_OFFSETS.items():
+            out[:, LANDMARK_INDEX[f"{side}_{part}"]] = (
+                wrist + scale * clip.hand_rot[:, k] @ np.asarray(offset))
+    return out
+
+
+def look_at_camera(clip: MocapClip, cfg: DetectorSimConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Intrinsics K (3, 3) and T_world2cam (4, 4) of the configured static camera."""
+    width, height = cfg.image_size
+    f = 0.5 * width / np.tan(np.deg2rad(cfg.fov_deg) / 2)
+    K = np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
+    pelvis = clip.joint("pelvis")
+    target = pelvis.mean(axis=0)
+    left = (clip.joint("l_hip") - clip.joint("r_hip")).mean(axis=0)
+    facing = np.cross(left, [0.0, 0.0, 1.0])
+    facing[2] = 0.0
+    facing /= np.linalg.norm(facing)
+    side = np.cross([0.0, 0.0, 1.0], facing)
+    az = np.deg2rad(cfg.azimuth_deg)
+    direction = np.cos(az) * facing + np.sin(az) * side  # from the subject towards the camera
+
+    def extrinsics(distance: float) -> np.ndarray:
+        centre = target + distance * direction
+        centre[2] = cfg.height
+        fwd = target - centre
+        fwd /= np.linalg.norm(fwd)
+        right = np.cross(fwd, [0.0, 0.0, 1.0])
+        right /= np.linalg.norm(right)
+        down = np.cross(fwd, right)
+        T = np.eye(4)
+        T[:3, :3] = np.stack([right, down, fwd])  # rows: camera axes in world coordinates
+        T[:3, 3] = -T[:3, :3] @ centre
+        return T
+
+    if cfg.distance is not None:
+        return K, extrinsics(cfg.distance)
+    points = np.concatenate([synthesize_landmarks(clip), clip.head_top[:, None]], axis=1)
+    margin = 0.05 * np.array([width, height])
+    for distance in np.arange(2.5, 60.0, 0.25):
+        T = extrinsics(distance)
+        if (transform_points(T, points)[..., 2] <= 0.3).any():
+            continue
+        uv = project(points, K, T)
+        if ((uv >= margin) & (uv <= np.array([width, height]) - margin)).all():
+            return K, T
+    return K, extrinsics(60.0)
+
+
+def _drift(rng: np.random.Generator, shape: tuple, fps: float, tau: float) -> np.ndarray:
+    """Unit-variance AR(1) noise along axis 0 with correlation time tau (s)."""
+    a = np.exp(-1.0 / (fps * tau)) if tau > 0 else 0.0
+    white = rng.standard_normal(shape)
+    out = np.empty(shape)
+    out[0] = white[0]
+    for t in range(1, shape[0]):
+        out[t] = a * out[t - 1] + np.sqrt(1 - a * a) * white[t]
+    return out
+
+
+def _visibility(lm_cam: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Far-side weight in [0, 1] and torso occlusion (bool), both (T, 33)."""
+    depth = lm_cam[..., 2]
+    far = np.zeros(depth.shape)
+    for k, name in enumerate(LANDMARK_NAMES):
+        twin = name.replace("left", "#").replace("right", "left").replace("#", "right")
+        if twin != name:
+            far[:, k] = np.clip((depth[:, k] - depth[:, LANDMARK_INDEX[twin]]) / FAR_SIDE_DEPTH,
+                                0.0, 1.0)
+    quad = [LANDMARK_INDEX[n] for n in ("left_shoulder", "right_shoulder", "right_hip",
+                                        "left_hip")]
+    corners = uv[:, quad]                                   # (T, 4, 2)
+    edges = np.roll(corners, -1, axis=1) - corners
+    rel = uv[:, None, :, :] - corners[:, :, None, :]        # (T, 4, 33, 2)
+    cross = edges[:, :, None, 0] * rel[..., 1] - edges[:, :, None, 1] * rel[..., 0]
+    inside = (cross > 0).all(axis=1) | (cross < 0).all(axis=1)
+    torso_depth = depth[:, quad].mean(axis=1, keepdims=True)
+    occluded = inside & (depth > torso_depth + OCCLUDED_MARGIN)
+    occluded[:, quad] = False
+    return far, occluded
+
+
+def _confidence_base() -> np.ndarray:
+    base = np.zeros(NUM_LANDMARKS)
+    for k, name in enumerate(LANDMARK_NAMES):
+        part = name.split("_", 1)[-1] if name.startswith(("left_", "right_")) else name
+        group = next(g for g, parts in _GROUP.items() if name in parts or part in parts)
+        base[k] = BASE_CONFIDENCE[group]
+    return base
+
+
+def _swap_events(rng: np.random.Generator, t: int, rate: float) -> np.ndarray:
+    """(T, 33) bool: landmarks exchanged with their twin (legs or arms, runs of frames)."""
+    swapped = np.zeros((t, NUM_LANDMARKS), dtype=bool)
+    starts = rng.random(t) < rate
+    limbs = rng.integers(0, len(_SWAP_PARTS), t)
+    lengths = rng.integers(SWAP_FRAMES[0], SWAP_FRAMES[1] + 1, t)
+    for i in np.flatnonzero(starts):
+        parts = list(_SWAP_PARTS.values())[limbs[i]]
+        cols = [LANDMARK_INDEX[f"{s}_{p}"] for s in ("left", "right") for p in parts]
+        swapped[i:i + lengths[i], cols] = True
+    return swapped
+
+
+def _apply_swaps(values: np.ndarray, swapped: np.ndarray) -> np.ndarray:
+    out = values.copy()
+    for k, name in enumerate(LANDMARK_NAMES):
+        if name.startswith("left_"):
+            j = LANDMARK_INDEX["right_" + name[5:]]
+            rows = swapped[:, k]
+            out[rows, k], out[rows, j] = values[rows, j], values[rows, k]
+    return out
+
+
+def simulate_detections(clip: MocapClip, cfg: DetectorSimConfig = DetectorSimConfig()
+                        ) -> SimulatedCapture:
+    """Noisy 2d/3d MediaPipe-style observations of a mocap clip from a virtual static camera."""
+    rng = np.random.default_rng(cfg.seed)
+    t = clip.num_frames
+    width, height = cfg.image_size
+    K, T = look_at_camera(clip, cfg)
+    lm = synthesize_landmarks(clip)
+    lm_cam = transform_points(T, lm)
+    uv_true = project(lm, K, T)
+    far, occluded = _visibility(lm_cam, uv_true)
+    gain = 1.0 + FAR_NOISE_GAIN * far + OCCLUDED_NOISE_GAIN * occluded     # (T, 33)
+    outline = np.concatenate([uv_true, project(clip.head_top, K, T)[:, None]], axis=1)
+    size = np.ptp(outline, axis=1).max(axis=1)[:, None, None]               # (T, 1, 1) px
+
+    # 2d: white + drifting noise in proportion to the person's size, larger on hidden landmarks.
+    noise2d = (cfg.sigma_2d_white * rng.standard_normal((t, NUM_LANDMARKS, 2))
+               + cfg.sigma_2d_drift * _drift(rng, (t, NUM_LANDMARKS, 2), clip.fps,
+                                             cfg.drift_time))
+    uv = uv_true + size * gain[..., None] * noise2d
+    conf = (_confidence_base()[None] - FAR_SIDE_DROP * far - OCCLUDED_DROP * occluded
+            + CONFIDENCE_JITTER * rng.standard_normal((t, NUM_LANDMARKS)))
+
+    # World landmarks: hip-centred, camera axes; per clip a lean, a scale and a depth
+    # compression; noise larger along the viewing direction (camera z).
+    hips = 0.5 * (lm_cam[:, LANDMARK_INDEX["left_hip"]] + lm_cam[:, LANDMARK_INDEX["right_hip"]])
+    wl_true = lm_cam - hips[:, None]
+    scale = cfg.scale_bias_mean + cfg.scale_bias_sigma * rng.standard_normal()
+    depth_scale = cfg.depth_scale_mean + cfg.depth_scale_sigma * rng.standard_normal()
+    lean = axis_rotation("x", np.deg2rad(cfg.lean_bias_sigma_deg) * rng.standard_normal())
+    axis_sigma = np.array([1.0, 1.0, cfg.depth_noise_ratio])
+    noise3d = (cfg.sigma_3d_white * rng.standard_normal((t, NUM_LANDMARKS, 3))
+               + cfg.sigma_3d_drift * _drift(rng, (t, NUM_LANDMARKS, 3), clip.fps,
+                                             cfg.drift_time)) * axis_sigma
+    wl = (wl_true @ lean.T) * np.array([1.0, 1.0, depth_scale]) * scale + gain[..., None] * noise3d
+
+    # Outliers: a large jump with moderately high confidence; swaps: left/right exchanged.
+    outliers = rng.random((t, NUM_LANDMARKS)) < cfg.outlier_rate
+    angle = rng.uniform(0, 2 * np.pi, (t, NUM_LANDMARKS))
+    jump = rng.uniform(*OUTLIER_OFFSET, (t, NUM_LANDMARKS)) * size[..., 0]
+    uv = uv + outliers[..., None] * (jump[..., None] * np.stack([np.cos(angle), np.sin(angle)], -1))
+    conf = np.where(outliers, rng.uniform(*OUTLIER_CONFIDENCE, (t, NUM_LANDMARKS)), conf)
+    swapped = _swap_events(rng, t, cfg.swap_rate)
+    uv, conf, wl = (_apply_swaps(v, swapped) for v in (uv, conf, wl))
+
+    inside = ((uv >= 0) & (uv <= np.array([width, height]))).all(axis=-1)
+    conf = np.clip(np.where(inside, conf, np.minimum(conf, OUTSIDE_CONFIDENCE)), 0.0, 1.0)
+    detected = inside.mean(axis=1) >= 0.5
+    kp = np.concatenate([uv, conf[..., None]], axis=-1)
+    kp[~detected] = 0.0
+    wl[~detected] = 0.0
+    obs = Observations(
+        source=f"simulated:{clip.source}", fps=clip.fps, image_size=(width, height),
+        timestamps=clip.times, keypoints2d=kp, detected=detected,
+        interpolated=np.zeros(t, dtype=bool), world_landmarks=wl,
+        camera_K=K.copy() if cfg.known_intrinsics else None, frame_indices=np.arange(t))
+    return SimulatedCapture(observations=obs, camera_K=K, camera_T_world2cam=T,
+                            joints=clip.joints.copy(), landmarks=lm, landmarks2d=uv_true,
+                            world_landmarks=wl_true, outliers=outliers, swapped=swapped)

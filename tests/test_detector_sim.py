@@ -1,0 +1,190 @@
+"""Detector simulator on a small synthetic clip: camera, landmarks, noise model, determinism."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from physpose.detector_sim import (DetectorSimConfig, look_at_camera, simulate_detections,
+                                   synthesize_landmarks)
+from physpose.joints import JOINT_INDEX, JOINT_NAMES, LANDMARK_INDEX, joints_from_landmarks
+from physpose.metrics import project
+from physpose.mocap import MocapClip
+
+NOISELESS = DetectorSimConfig(
+    distance=4.0, sigma_2d_white=0.0, sigma_2d_drift=0.0, sigma_3d_white=0.0,
+    sigma_3d_drift=0.0, scale_bias_mean=1.0, scale_bias_sigma=0.0, depth_scale_mean=1.0,
+    depth_scale_sigma=0.0, lean_bias_sigma_deg=0.0, outlier_rate=0.0, swap_rate=0.0)
+
+
+def walking_clip(frames: int = 50, fps: float = 25.0, speed: float = 1.0) -> MocapClip:
+    """A rigid standing figure (facing +x, 1.75 m) gliding along +x (m/s), swinging its arms."""
+    p = {"pelvis": (0, 0, 0.95), "spine": (0, 0, 1.175), "thorax": (0, 0, 1.40),
+         "neck": (0, 0, 1.49), "head": (0, 0, 1.58), "shoulder": (0, 0.18, 1.40),
+         "elbow": (0, 0.20, 1.12), "wrist": (0, 0.21, 0.88), "hip": (0, 0.09, 0.95),
+         "knee": (0.02, 0.10, 0.50), "ankle": (0, 0.10, 0.08), "heel": (-0.06, 0.10, 0.0),
+         "toe": (0.19, 0.10, 0.0)}
+    pose = np.array([p[n] if n in p else
+                     np.multiply(p[n[2:]], (1, 1 if n[0] == "l" else -1, 1))
+                     for n in JOINT_NAMES], dtype=float)
+    t = np.arange(frames) / fps
+    joints = pose[None].repeat(frames, 0)
+    joints[..., 0] += speed * t[:, None]
+    for side in ("l", "r"):   # wrists swing back and forth
+        joints[:, JOINT_INDEX[f"{side}_wrist"], 0] += 0.2 * np.sin(2 * np.pi * t)
+    hand = np.stack([[0, 0, -1.0], [1.0, 0, 0], [0, -1.0, 0]], axis=1)  # down, thumb forward
+    return MocapClip(name="glide", source="synthetic", fps=fps, joints=joints,
+                     head_top=joints[:, JOINT_INDEX["head"]] + [0, 0, 0.17],
+                     head_rot=np.broadcast_to(np.eye(3), (frames, 3, 3)).copy(),
+                     hand_rot=np.broadcast_to(hand, (frames, 2, 3, 3)).copy(),
+                     source_fps=fps, floor_offset=0.0)
+
+
+def test_landmarks_reproduce_the_joints_and_face_forward():
+    clip = walking_clip(5)
+    lm = synthesize_landmarks(clip)
+    assert lm.shape == (5, 33, 3)
+    assert joints_from_landmarks(lm) == pytest.approx(clip.joints)
+    nose, head = lm[:, LANDMARK_INDEX["nose"]], clip.joint("head")
+    assert (nose[:, 0] - head[:, 0] > 0.08).all()                # the face looks along +x
+    assert (lm[:, LANDMARK_INDEX["left_eye"], 1] > lm[:, LANDMARK_INDEX["right_eye"], 1]).all()
+    thumb = lm[:, LANDMARK_INDEX["left_thumb"]] - clip.joint("l_wrist")
+    assert (thumb[:, 0] > 0.03).all() and (thumb[:, 2] < -0.03).all()   # forward and below the wrist
+
+
+def test_camera_looks_at_the_subject_from_the_configured_place():
+    clip = walking_clip()
+    cfg = DetectorSimConfig(distance=5.0, height=1.5, azimuth_deg=0.0)
+    K, T = look_at_camera(clip, cfg)
+    R = T[:3, :3]
+    assert R @ R.T == pytest.approx(np.eye(3)) and np.linalg.det(R) == pytest.approx(1.0)
+    centre = -R.T @ T[:3, 3]
+    target = clip.joint("pelvis").mean(axis=0)
+    assert centre[2] == pytest.approx(1.5)
+    assert centre[:2] - target[:2] == pytest.approx([5.0, 0.0])   # in front: subject faces +x
+    uv = project(target, K, T)
+    assert uv == pytest.approx([960.0, 540.0])                      # looked-at point: centre
+    assert K[0, 0] == pytest.approx(960.0 / np.tan(np.deg2rad(30.0)))
+    side = look_at_camera(clip, dataclasses.replace(cfg, azimuth_deg=90.0))[1]
+    assert (-side[:3, :3].T @ side[:3, 3])[1] - target[1] == pytest.approx(5.0)  # at its left
+
+
+def test_auto_distance_keeps_everything_in_view():
+    clip = walking_clip()
+    sim = simulate_detections(clip, dataclasses.replace(NOISELESS, distance=None))
+    uv = sim.landmarks2d
+    assert (uv > 0).all() and (uv[..., 0] < 1920).all() and (uv[..., 1] < 1080).all()
+    assert sim.observations.detected.all()
+
+
+def test_noiseless_simulation_is_the_projection_of_the_truth():
+    clip = walking_clip()
+    sim = simulate_detections(clip, NOISELESS)
+    obs = sim.observations
+    assert obs.keypoints2d[..., :2] == pytest.approx(project(sim.landmarks, sim.camera_K,
+                                                             sim.camera_T_world2cam))
+    R = sim.camera_T_world2cam[:3, :3]
+    hips = 0.5 * (sim.landmarks[:, LANDMARK_INDEX["left_hip"]]
+                  + sim.landmarks[:, LANDMARK_INDEX["right_hip"]])
+    assert obs.world_landmarks == pytest.approx((sim.landmarks - hips[:, None]) @ R.T)
+    assert obs.world_landmarks[:, LANDMARK_INDEX["nose"], 1].mean() < -0.5   # head up = -y
+    assert obs.fps == 25.0 and obs.image_size == (1920, 1080) and obs.camera_K is None
+    assert obs.timestamps == pytest.approx(np.arange(50) / 25.0)
+
+
+def test_same_seed_same_output_other_seed_other_output():
+    clip = walking_clip()
+    a = simulate_detections(clip, DetectorSimConfig(seed=7))
+    b = simulate_detections(clip, DetectorSimConfig(seed=7))
+    c = simulate_detections(clip, DetectorSimConfig(seed=8))
+    for key in ("keypoints2d", "world_landmarks"):
+        assert np.array_equal(getattr(a.observations, key), getattr(b.observations, key))
+        assert not np.allclose(getattr(a.observations, key), getattr(c.observations, key))
+    assert np.array_equal(a.outliers, b.outliers) and np.array_equal(a.swapped, b.swapped)
+
+
+def person_size(sim) -> np.ndarray:
+    """(T,) long side of the 2d bounding box of the true landmarks and head top, px."""
+    top = project(sim.joints[:, JOINT_INDEX["head"]] + [0, 0, 0.17], sim.camera_K,
+                  sim.camera_T_world2cam)
+    outline = np.concatenate([sim.landmarks2d, top[:, None]], axis=1)
+    return np.ptp(outline, axis=1).max(axis=1)
+
+
+def test_2d_noise_scales_with_the_person_in_the_image():
+    clip = walking_clip()
+    cfg = DetectorSimConfig(distance=4.0, seed=3)
+    small = simulate_detections(clip, cfg)
+    big = simulate_detections(clip, dataclasses.replace(cfg, image_size=(3840, 2160)))
+    err_small = small.observations.keypoints2d[..., :2] - small.landmarks2d
+    err_big = big.observations.keypoints2d[..., :2] - big.landmarks2d
+    assert err_big == pytest.approx(2 * err_small)
+
+
+def test_noise_levels_follow_the_config():
+    clip = walking_clip(400, speed=0.0)
+    cfg = dataclasses.replace(NOISELESS, sigma_2d_white=0.01, sigma_3d_white=0.02, seed=1,
+                              depth_noise_ratio=2.0, azimuth_deg=0.0)  # frontal: all unhidden
+    sim = simulate_detections(clip, cfg)
+    front = [LANDMARK_INDEX[n] for n in ("nose", "left_shoulder", "right_shoulder")]
+    err2d = sim.observations.keypoints2d[:, front, :2] - sim.landmarks2d[:, front]
+    size = person_size(sim)
+    assert 400 < size.mean() < 800
+    assert (err2d / size[:, None, None]).std() == pytest.approx(0.01, rel=0.1)   # gain 1
+    err3d = sim.observations.world_landmarks[:, front] - sim.world_landmarks[:, front]
+    assert err3d[..., 0].std() == pytest.approx(0.02, rel=0.1)
+    assert err3d[..., 2].std() == pytest.approx(0.04, rel=0.1)   # depth: 2x lateral
+
+
+def test_scale_and_depth_bias_are_per_clip():
+    clip = walking_clip()
+    cfg = dataclasses.replace(NOISELESS, scale_bias_sigma=0.1, depth_scale_mean=0.8, seed=2)
+    sim = simulate_detections(clip, cfg)
+    wl, true = sim.observations.world_landmarks, sim.world_landmarks
+    ratio_x = wl[..., 0][np.abs(true[..., 0]) > 0.05] / true[..., 0][np.abs(true[..., 0]) > 0.05]
+    ratio_z = wl[..., 2][np.abs(true[..., 2]) > 0.05] / true[..., 2][np.abs(true[..., 2]) > 0.05]
+    assert np.ptp(ratio_x) < 1e-9 and abs(ratio_x[0] - 1.0) > 1e-3   # one scale for the clip
+    assert ratio_z == pytest.approx(0.8 * ratio_x[0])
+
+
+def test_lean_bias_rotates_about_the_hips_and_camera_x():
+    clip = walking_clip()
+    sim = simulate_detections(clip, dataclasses.replace(NOISELESS, lean_bias_sigma_deg=10.0))
+    wl, true = sim.observations.world_landmarks, sim.world_landmarks
+    assert np.linalg.norm(wl, axis=-1) == pytest.approx(np.linalg.norm(true, axis=-1))
+    assert wl[..., 0] == pytest.approx(true[..., 0])
+    assert np.abs(wl[..., 2] - true[..., 2]).max() > 0.01
+
+
+def test_far_side_landmarks_are_less_confident():
+    clip = walking_clip()
+    cfg = dataclasses.replace(NOISELESS, azimuth_deg=90.0)   # camera at the subject's left
+    conf = simulate_detections(clip, cfg).observations.keypoints2d[..., 2]
+    for part in ("shoulder", "elbow", "knee", "ankle"):
+        assert conf[:, LANDMARK_INDEX[f"right_{part}"]].mean() < \
+            conf[:, LANDMARK_INDEX[f"left_{part}"]].mean() - 0.2
+
+
+def test_outliers_and_swaps():
+    clip = walking_clip(200, speed=0.0)
+    sim = simulate_detections(clip, dataclasses.replace(NOISELESS, outlier_rate=0.1, seed=4))
+    jump = np.linalg.norm(sim.observations.keypoints2d[..., :2] - sim.landmarks2d, axis=-1)
+    assert sim.outliers.mean() == pytest.approx(0.1, abs=0.02)
+    size = person_size(sim)[:, None]
+    assert (jump[sim.outliers] >= (0.13 * size - 1e-6).repeat(33, 1)[sim.outliers]).all()
+    assert (jump[~sim.outliers] < 1e-6).all()
+    kp = sim.observations.keypoints2d
+    in_view = ((kp[..., :2] >= 0) & (kp[..., :2] <= (1920, 1080))).all(axis=-1)
+    assert (kp[sim.outliers & in_view, 2] >= 0.5).all()      # moderately high confidence
+    assert (kp[~in_view, 2] <= 0.05).all()                   # outside the image: low
+
+    sim = simulate_detections(clip, dataclasses.replace(NOISELESS, swap_rate=0.2, seed=4))
+    kp = sim.observations.keypoints2d[..., :2]
+    assert sim.swapped.any()
+    left, right = LANDMARK_INDEX["left_knee"], LANDMARK_INDEX["right_knee"]
+    rows = sim.swapped[:, left]
+    assert kp[rows, left] == pytest.approx(sim.landmarks2d[rows, right])
+    assert kp[~rows, left] == pytest.approx(sim.landmarks2d[~rows, left])
+    assert (sim.swapped[:, left] == sim.swapped[:, right]).all()
