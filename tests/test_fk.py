@@ -12,7 +12,7 @@ from physpose.body import build_body
 from physpose.fk import (angles_from_matrices, fk, fk_mujoco, fk_qpos, matrices_from_angles,
                          matrix_from_quat)
 from physpose.joints import JOINT_INDEX, joints_from_landmarks
-from physpose.skeleton import DOF_LIMITS, DOF_NAMES, NUM_DOF
+from physpose.skeleton import BONE_INDEX, DOF_LIMITS, DOF_NAMES, NUM_DOF
 
 
 def _random_qpos(rng: np.random.Generator, n: int) -> np.ndarray:
@@ -50,7 +50,6 @@ def test_gradients_are_the_chain_derivatives():
     bones, angles = jnp.asarray(shape.bones()), jnp.zeros(NUM_DOF)
     d_bones = np.asarray(jax.jacfwd(left_knee, 0)(bones, angles))
     d_angles = np.asarray(jax.jacfwd(left_knee, 1)(bones, angles))
-    from physpose.skeleton import BONE_INDEX
     assert np.allclose(d_bones[:, BONE_INDEX["thigh"]], [0, 0, -1])
     assert np.allclose(d_bones[:, BONE_INDEX["hip_width"]], [0, 0.5, 0])
     assert np.allclose(d_bones[:, BONE_INDEX["shank"]], 0)

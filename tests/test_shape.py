@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from physpose.errors import PhysposeError
-from physpose.shape import BodyShape, mass_from_height, stature_from_bones
-from physpose.skeleton import BONE_NAMES
+from physpose.fk import fk
+from physpose.shape import (BodyShape, bone_lengths_from_landmarks, mass_from_height,
+                            stature_from_bones)
+from physpose.skeleton import BONE_NAMES, DOF_LIMITS
 
 
 @pytest.mark.parametrize("height", [0.5, 1.5, 1.75, 1.95, 2.5])
@@ -60,3 +62,22 @@ def test_segment_widths_set_radii():
 def test_bad_input_is_a_physpose_error(call, match):
     with pytest.raises(PhysposeError, match=match):
         call()
+
+
+def test_bone_lengths_measured_on_posed_landmarks():
+    truth = BodyShape.from_height(1.83, mass=77.0)
+    rng = np.random.default_rng(7)
+    angles = rng.uniform(DOF_LIMITS[:, 0], DOF_LIMITS[:, 1], size=(6, 48))
+    quat = rng.normal(size=(6, 4))
+    _, landmarks = fk(truth.bones(), rng.normal(size=(6, 3)), quat, angles)
+    landmarks = np.concatenate([landmarks, np.zeros((1, 33, 3))])  # an undetected frame
+    measured = bone_lengths_from_landmarks(landmarks)
+    # Trunk and neck lengths bend with the spine and neck joints: exact only when straight.
+    for name in BONE_NAMES:
+        if name not in ("trunk", "neck"):
+            assert measured[name] == pytest.approx(getattr(truth, name), rel=1e-9), name
+    rest = fk(truth.bones(), np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(48))[1]
+    again = BodyShape.from_bone_lengths(bone_lengths_from_landmarks(rest), mass=77.0)
+    assert np.allclose(again.bones(), truth.bones()) and again.height == pytest.approx(1.83)
+    with pytest.raises(PhysposeError, match="no valid frame"):
+        bone_lengths_from_landmarks(np.zeros((2, 33, 3)))

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from physpose.fk import fk
 from physpose.joints import JOINT_NAMES, LANDMARK_NAMES, joints_from_landmarks
 from physpose.shape import HEAD_TOP_PER_EAR_WIDTH, BodyShape, stature_from_bones
 from physpose.skeleton import (ACTUATED_SEGMENTS, AXES, BONE_NAMES, DOF_LIMITS, DOF_NAMES,
-                               DOF_TORQUE, LANDMARK_SITES, NQ, NUM_DOF, NV, PARENTS,
+                               DOF_TORQUE, LANDMARK_PARENTS, LANDMARK_SITES, NQ, NUM_DOF, NV, PARENTS,
                                SEGMENT_INDEX, SEGMENT_NAMES, SEGMENTS, landmark_offsets,
                                rest_positions)
 
@@ -59,7 +60,6 @@ def test_rest_pose_geometry():
     bones = shape.bones()
     pos = rest_positions(bones)
     off = landmark_offsets(bones)
-    from physpose.skeleton import LANDMARK_PARENTS
     lm = pos[list(LANDMARK_PARENTS)] + off
     at = {n: lm[i] for i, n in enumerate(LANDMARK_NAMES)}
     for name in LANDMARK_NAMES:  # the person's left is +y
@@ -75,7 +75,6 @@ def test_rest_pose_geometry():
 
 
 def test_trunk_joints_match_the_landmark_proxies_in_the_rest_pose():
-    from physpose.fk import fk
     bones = BodyShape.from_height(1.6).bones()
     q = np.array([1.0, 0, 0, 0])
     joints, landmarks = fk(bones, np.zeros(3), q, np.zeros(NUM_DOF))

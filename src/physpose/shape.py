@@ -18,7 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from physpose.errors import PhysposeError
-from physpose.skeleton import BONE_NAMES
+from physpose.joints import LANDMARK_NAMES
+from physpose.skeleton import BONE_NAMES, FOOT_LANDMARK_Z
 
 HEIGHT_RANGE = (0.5, 2.5)  # m, accepted statures
 MASS_RANGE = (20.0, 300.0)  # kg, accepted masses
@@ -171,6 +172,59 @@ class BodyShape:
         _check_height(height)
         bones = {n: given.get(n, f * height) for n, f in _BONE_FRACTION.items()}
         return _assemble(height, mass, build, sex, bones)
+
+
+def bone_lengths_from_landmarks(landmarks: np.ndarray, valid: np.ndarray | None = None
+                                ) -> dict[str, float]:
+    """Bone lengths (m) measured on 3d landmarks, median over frames, left and right averaged.
+
+    landmarks: (T, 33, 3) or (33, 3) metric positions in MediaPipe order (e.g. the world
+    landmarks). valid: (T,) bool frames to use (default: frames that are not all zero). The
+    ankle height and heel offset follow from the ankle-heel, ankle-toe and heel-toe distances
+    under the skeleton's foot geometry. Returns {BONE_NAMES name: length}, ready for
+    ``BodyShape.from_bone_lengths``.
+    """
+    lm = np.asarray(landmarks, dtype=float)
+    lm = lm[None] if lm.ndim == 2 else lm
+    if lm.ndim != 3 or lm.shape[1:] != (len(LANDMARK_NAMES), 3):
+        raise PhysposeError(f"landmarks have shape {lm.shape}",
+                            remedy="pass (T, 33, 3) metric landmarks in MediaPipe order")
+    keep = np.any(lm != 0, axis=(1, 2)) if valid is None else np.asarray(valid, dtype=bool)
+    if keep.shape != (len(lm),) or not keep.any():
+        raise PhysposeError("no valid frame to measure bone lengths on",
+                            remedy="pass frames where the person was detected")
+    lm = lm[keep]
+
+    def at(name: str) -> np.ndarray:
+        return lm[:, LANDMARK_NAMES.index(name)]
+
+    def dist(a: np.ndarray, b: np.ndarray) -> float:
+        return float(np.median(np.linalg.norm(a - b, axis=-1)))
+
+    def sides(a: str, b: str) -> float:
+        return 0.5 * (dist(at(f"left_{a}"), at(f"left_{b}")) + dist(at(f"right_{a}"),
+                                                                      at(f"right_{b}")))
+
+    def mid(name: str) -> np.ndarray:
+        return 0.5 * (at(f"left_{name}") + at(f"right_{name}"))
+
+    foot, heel, toe = sides("heel", "foot_index"), sides("ankle", "heel"), sides("ankle",
+                                                                                "foot_index")
+    # heel = ankle + (-b, 0, z), toe = ankle + (foot - b, 0, z), z = FOOT_LANDMARK_Z x ankle
+    # height: two distances from the ankle give b and z.
+    back = float(np.clip((foot ** 2 - toe ** 2 + heel ** 2) / (2 * foot), 1e-3, heel - 1e-3))
+    ankle_height = float(np.sqrt(heel ** 2 - back ** 2) / abs(FOOT_LANDMARK_Z))
+    return {
+        "hip_width": dist(at("left_hip"), at("right_hip")),
+        "trunk": dist(mid("shoulder"), mid("hip")),
+        "shoulder_width": dist(at("left_shoulder"), at("right_shoulder")),
+        "neck": dist(mid("ear"), mid("shoulder")),
+        "ear_width": dist(at("left_ear"), at("right_ear")),
+        "upper_arm": sides("shoulder", "elbow"), "forearm": sides("elbow", "wrist"),
+        "hand": sides("wrist", "index"), "thigh": sides("hip", "knee"),
+        "shank": sides("knee", "ankle"), "ankle_height": ankle_height, "foot_length": foot,
+        "heel_back": back,
+    }
 
 
 def stature_from_bones(bones: np.ndarray) -> float:

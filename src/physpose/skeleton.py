@@ -35,6 +35,7 @@ axes of knee and elbow held to a few degrees.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -173,8 +174,11 @@ _FACE: dict[str, tuple[float, float, float]] = {
     "left_ear": (0.0, 0.5, 0.0), "right_ear": (0.0, -0.5, 0.0),
     "mouth_left": (0.60, 0.16, -0.33), "mouth_right": (0.60, -0.16, -0.33),
 }
-_HAND = {"pinky": (-0.35, 0.0, -0.85), "index": (0.25, 0.0, -0.97), "thumb": (0.45, -0.12, -0.60)}
-_FOOT_Z = -0.75  # heel and toe landmarks sit a quarter of the ankle height above the sole
+# (the index landmark is exactly one "hand" length from the wrist)
+_HAND = {"pinky": (-0.35, 0.0, -0.85), "index": (0.25, 0.0, -math.sqrt(1.0 - 0.25 ** 2)),
+         "thumb": (0.45, -0.12, -0.60)}
+# Heel and toe landmarks sit a quarter of the ankle height above the sole.
+FOOT_LANDMARK_Z = -0.75
 
 
 def _landmark_table() -> dict[str, tuple[str, _Linear]]:
@@ -188,10 +192,10 @@ def _landmark_table() -> dict[str, tuple[str, _Linear]]:
         for finger, (cx, cy, cz) in _HAND.items():
             table[f"{side}_{finger}"] = (f"{s}_wrist", {"hand": (cx, sign * cy, cz)})
         table[f"{side}_heel"] = (f"{s}_ankle", {"heel_back": (-1.0, 0.0, 0.0),
-                                                "ankle_height": (0.0, 0.0, _FOOT_Z)})
+                                                "ankle_height": (0.0, 0.0, FOOT_LANDMARK_Z)})
         table[f"{side}_foot_index"] = (f"{s}_ankle", {"foot_length": (1.0, 0.0, 0.0),
                                                       "heel_back": (-1.0, 0.0, 0.0),
-                                                      "ankle_height": (0.0, 0.0, _FOOT_Z)})
+                                                      "ankle_height": (0.0, 0.0, FOOT_LANDMARK_Z)})
     return table
 
 
