@@ -9,9 +9,9 @@ from physpose.fk import fk
 from physpose.joints import JOINT_NAMES, LANDMARK_NAMES, joints_from_landmarks
 from physpose.shape import HEAD_TOP_PER_EAR_WIDTH, BodyShape, stature_from_bones
 from physpose.skeleton import (ACTUATED_SEGMENTS, AXES, BONE_NAMES, DOF_LIMITS, DOF_NAMES,
-                               DOF_TORQUE, LANDMARK_PARENTS, LANDMARK_SITES, NQ, NUM_DOF, NV, PARENTS,
-                               SEGMENT_INDEX, SEGMENT_NAMES, SEGMENTS, landmark_offsets,
-                               rest_positions)
+                               DOF_TORQUE, LANDMARK_PARENTS, LANDMARK_SITES, NQ, NUM_DOF, NV,
+                               PARENTS, SEGMENT_INDEX, SEGMENT_NAMES, SEGMENTS,
+                               landmark_offsets, rest_positions)
 
 
 def test_sixteen_three_axis_joints_make_48_dof():
