@@ -1,8 +1,9 @@
 """Simulation speed of the body: steps/s single-threaded (mj_step) and batched (mujoco.rollout).
 
 Two motions: holding the standing pose, and walking-like servo targets (hips, knees and
-shoulders swinging at 1 Hz, so the feet leave and hit the ground). Batched runs start many
-perturbed initial states, as the trajectory optimisation does. Usage:
+shoulders swinging at 1 Hz, so the feet leave and hit the ground; open loop, so the body
+loses balance within a few seconds and the run also covers falling and lying contacts).
+Batched runs start many perturbed initial states, as the trajectory optimisation does. Usage:
 
     uv run python benchmarks/bench_body.py --out out/bench_body.json [--threads 2]
 """
@@ -55,7 +56,8 @@ def single_thread(body: Body, motion: str, steps: int) -> dict:
         contacts += data.ncon
     dt = time.perf_counter() - t0
     return {"motion": motion, "steps": steps, "seconds": dt, "steps_per_s": steps / dt,
-            "mean_contacts": contacts / steps, "finite": bool(np.isfinite(data.qpos).all())}
+            "mean_contacts": contacts / steps, "final_pelvis_z": float(data.qpos[2]),
+            "finite": bool(np.isfinite(data.qpos).all())}
 
 
 def batched(body: Body, motion: str, nbatch: int, nstep: int, threads: int) -> dict:
@@ -108,7 +110,8 @@ def main() -> None:
     }
     for row in result["single_thread"]:
         print(f"single thread, {row['motion']:5s}: {row['steps_per_s']:8.0f} steps/s "
-              f"({row['mean_contacts']:.1f} contacts/step)")
+              f"({row['mean_contacts']:.1f} contacts/step, pelvis ends at "
+              f"{row['final_pelvis_z']:.2f} m)")
     for row in result["batched"]:
         print(f"rollout x{row['threads']} threads, {row['motion']:5s}: "
               f"{row['steps_per_s']:8.0f} steps/s = {row['one_second_rollouts_per_s']:.0f} "
