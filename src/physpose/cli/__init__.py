@@ -17,6 +17,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "demo",
     "body",
     "export",
+    "benchmark",
 )
 
 

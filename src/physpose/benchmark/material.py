@@ -1,0 +1,200 @@
+"""Benchmark material turned into clips: observations for a variant plus what scores it.
+
+Three kinds: `mocap` (motion capture through the detector simulator; ground truth in a virtual
+camera), `multiview` (one clip per view of a calibrated multi-view folder; the triangulated
+reference is the truth), `video` (a real video; no 3d truth).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from physpose.benchmark.variants import VariantContext
+from physpose.detector_sim import DetectorSimConfig, simulate_detections
+from physpose.errors import PhysposeError
+from physpose.mocap import MOCAP_SUFFIXES, MocapClip, body_height, load_mocap
+from physpose.multiview.reference import (ReferenceConfig, build_multiview_reference,
+                                          find_multiview_files)
+from physpose.observations import Observations
+from physpose.observe import ObserveConfig, observe
+from physpose.paths import pose2sim_demo_dir, shared_data_dir
+from physpose.video import VIDEO_EXTENSIONS, probe
+
+KINDS = ("mocap", "multiview", "video")
+
+
+@dataclass(frozen=True)
+class MaterialConfig:
+    """How material is cut and observed for the benchmark."""
+
+    fps: float = 25.0             # Hz, target analysis rate (the paper's)
+    max_seconds: float = 4.0      # s, clip length cap (the paper's clips are 100 frames at 25 Hz)
+    known_intrinsics: bool = True   # tell variants the camera K when the material has one
+    known_extrinsics: bool = False  # tell variants the camera pose (then ground is not scored)
+    known_height: bool = False    # tell variants the person's stature when the material has it
+    seed: int = 0                 # detector simulator seed
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.fps) and self.fps > 0):
+            raise PhysposeError(f"fps={self.fps} must be > 0", remedy="pass e.g. --fps 25")
+        if not (math.isfinite(self.max_seconds) and self.max_seconds > 0):
+            raise PhysposeError(f"max_seconds={self.max_seconds} must be > 0",
+                                remedy="pass --max-seconds with a positive number of seconds")
+
+
+@dataclass(frozen=True, eq=False)
+class Truth:
+    """Ground truth of a clip, world frame (z up, floor z = 0), and the camera that saw it."""
+
+    joints: np.ndarray         # (T, J, 3) m, JOINT_NAMES order
+    T_world2cam: np.ndarray    # (4, 4) OpenCV camera axes
+    K: np.ndarray              # (3, 3) px
+    dist: np.ndarray = field(default_factory=lambda: np.zeros(5))  # OpenCV k1, k2, p1, p2, k3
+
+
+@dataclass(frozen=True, eq=False)
+class Clip:
+    """One benchmark input: what a variant sees and what it is scored against."""
+
+    kind: str                     # one of KINDS
+    name: str
+    source: str                   # file or folder it came from
+    observations: Observations
+    context: VariantContext
+    truth: Truth | None           # None for real videos
+    timings_s: dict[str, float]   # seconds spent producing the observations, per stage
+
+
+@dataclass(frozen=True)
+class Material:
+    """A file or folder to benchmark on."""
+
+    kind: str
+    path: Path
+
+
+def uniform_fps(native: float, target: float) -> float:
+    """The rate nearest `target` that samples a `native`-rate source at a fixed frame step."""
+    return native / max(1, round(native / target))
+
+
+def load_clips(material: Material, cfg: MaterialConfig) -> list[Clip]:
+    """The clips of one piece of material (one per view for multi-view folders)."""
+    loaders = {"mocap": _mocap_clips, "multiview": _multiview_clips, "video": _video_clips}
+    if material.kind not in loaders:
+        raise ValueError(f"unknown material kind {material.kind!r}")
+    if not material.path.exists():
+        raise PhysposeError(f"{material.kind} material not found", path=material.path,
+                            remedy="check the path")
+    return loaders[material.kind](material.path, cfg)
+
+
+def shared_material() -> tuple[list[Material], list[str]]:
+    """The shared evaluation material that is present, and a message for each absent part."""
+    found: list[Material] = []
+    skipped: list[str] = []
+    mocap = shared_data_dir() / "mocap"
+    files = sorted(p for p in mocap.rglob("*") if _is_mocap_clip(p)) if mocap.is_dir() else []
+    found += [Material("mocap", p) for p in files]
+    if not files:
+        skipped.append(f"no motion capture in {mocap} (see ../shared/data/README.md)")
+    videos = shared_data_dir() / "video"
+    clips = sorted(p for p in videos.glob("*") if p.suffix.lower() in VIDEO_EXTENSIONS) \
+        if videos.is_dir() else []
+    found += [Material("video", p) for p in clips]
+    if not clips:
+        skipped.append(f"no videos in {videos} (see ../shared/data/README.md)")
+    demo = pose2sim_demo_dir()
+    if (demo / "videos").is_dir() and (demo / "calibration").is_dir():
+        found.append(Material("multiview", demo))
+    else:
+        skipped.append(f"pose2sim demo not found at {demo}; run `make data`")
+    return found, skipped
+
+
+def _is_mocap_clip(path: Path) -> bool:
+    """BVH, AMC or DeepMimic motion files (not skeleton-only files such as character_*.txt)."""
+    if path.suffix.lower() not in MOCAP_SUFFIXES or not path.is_file():
+        return False
+    return path.suffix.lower() in (".bvh", ".amc") or not path.name.startswith("character_")
+
+
+def _clip_end(duration: float, cfg: MaterialConfig) -> float | None:
+    return None if duration <= cfg.max_seconds else cfg.max_seconds
+
+
+def _observe_config(video: Path, cfg: MaterialConfig) -> ObserveConfig:
+    info = probe(video)
+    return ObserveConfig(target_fps=uniform_fps(info.fps, cfg.fps),
+                         end=_clip_end(info.duration, cfg))
+
+
+def _video_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:
+    start = time.perf_counter()
+    obs = observe(path, _observe_config(path, cfg), progress=False)
+    return [Clip(kind="video", name=path.stem, source=str(path), observations=obs,
+                 context=VariantContext(seed=cfg.seed), truth=None,
+                 timings_s={"observe": time.perf_counter() - start})]
+
+
+def _multiview_clips(folder: Path, cfg: MaterialConfig) -> list[Clip]:
+    start = time.perf_counter()
+    files = find_multiview_files(folder)
+    ref = build_multiview_reference(folder, ReferenceConfig(
+        observe=_observe_config(files.videos[0], cfg)))
+    elapsed = {"observe+triangulate (all views)": time.perf_counter() - start}
+    clips = []
+    for cam, obs in zip(ref.cameras, ref.views):
+        context = VariantContext(
+            camera_K=cam.K if cfg.known_intrinsics else None,
+            camera_T_world2cam=cam.T_world2cam if cfg.known_extrinsics else None, seed=cfg.seed)
+        truth = Truth(joints=ref.joints, T_world2cam=cam.T_world2cam, K=cam.K, dist=cam.dist)
+        clips.append(Clip(kind="multiview", name=f"{folder.name}/{cam.name}",
+                          source=str(folder), observations=obs, context=context, truth=truth,
+                          timings_s=elapsed))
+    return clips
+
+
+def _mocap_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:
+    start = time.perf_counter()
+    motion = load_mocap(path, target_fps=cfg.fps)
+    clip = mocap_clip(motion, cfg, name=path.stem)
+    clip.timings_s["load"] = time.perf_counter() - start - clip.timings_s["simulate"]
+    return [clip]
+
+
+def mocap_clip(motion: MocapClip, cfg: MaterialConfig, name: str) -> Clip:
+    """A benchmark clip from ground-truth motion: cropped, then seen by the detector simulator."""
+    start = time.perf_counter()
+    motion = crop_mocap(motion, cfg.max_seconds)
+    capture = simulate_detections(motion, DetectorSimConfig(seed=cfg.seed))
+    context = VariantContext(
+        camera_K=capture.camera_K if cfg.known_intrinsics else None,
+        camera_T_world2cam=capture.camera_T_world2cam if cfg.known_extrinsics else None,
+        person_height=body_height(motion) if cfg.known_height else None, seed=cfg.seed)
+    truth = Truth(joints=capture.joints, T_world2cam=capture.camera_T_world2cam,
+                  K=capture.camera_K)
+    return Clip(kind="mocap", name=name, source=motion.source,
+                observations=capture.observations, context=context, truth=truth,
+                timings_s={"simulate": time.perf_counter() - start})
+
+
+def crop_mocap(clip: MocapClip, max_seconds: float) -> MocapClip:
+    """The first `max_seconds` of a clip (at least two frames)."""
+    n = max(2, int(round(max_seconds * clip.fps)))
+    if clip.num_frames <= n:
+        return clip
+    return dataclasses.replace(clip, **{k: getattr(clip, k)[:n] for k in
+                                        ("joints", "head_top", "head_rot", "hand_rot")})
+
+
+def iter_clips(materials: list[Material], cfg: MaterialConfig) -> Iterator[Clip]:
+    for material in materials:
+        yield from load_clips(material, cfg)

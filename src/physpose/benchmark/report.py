@@ -1,0 +1,147 @@
+"""Benchmark results: aggregation and the `results.json` / `results.md` files."""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import defaultdict
+from pathlib import Path
+
+# (column title, key in a result's "metrics" or "ground" dict, format); the paper's Table 2 order.
+COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("MPJPE-G (mm)", "mpjpe_g_mm", "{:.0f}"),
+    ("MPJPE (mm)", "mpjpe_mm", "{:.0f}"),
+    ("MPJPE-PA (mm)", "mpjpe_pa_mm", "{:.0f}"),
+    ("MPJPE-2d (px)", "mpjpe_2d_px", "{:.1f}"),
+    ("Velocity (m/s)", "velocity_error_mps", "{:.2f}"),
+    ("Foot skate (%)", "foot_skate_pct", "{:.0f}"),
+    ("Float (%)", "float_pct", "{:.0f}"),
+    ("Penetration (mm)", "penetration_mean_mm", "{:.1f}"),
+    ("Jitter (m/s²)", "jitter_mps2", "{:.1f}"),
+    ("Ground normal err (deg)", "normal_angle_error_deg", "{:.1f}"),
+    ("Camera height err (%)", "camera_height_error_pct", "{:.0f}"),
+    ("Camera height (m)", "camera_height_m", "{:.2f}"),
+    ("Camera tilt (deg)", "camera_tilt_deg", "{:.1f}"),
+)
+# Columns shown per kind of material (those without ground truth cannot have the 3d errors).
+KIND_COLUMNS: dict[str, tuple[str, ...]] = {
+    "mocap": ("mpjpe_g_mm", "mpjpe_mm", "mpjpe_pa_mm", "mpjpe_2d_px", "velocity_error_mps",
+              "foot_skate_pct", "float_pct", "penetration_mean_mm", "jitter_mps2",
+              "normal_angle_error_deg", "camera_height_error_pct"),
+    "multiview": ("mpjpe_g_mm", "mpjpe_mm", "mpjpe_pa_mm", "mpjpe_2d_px", "velocity_error_mps",
+                  "foot_skate_pct", "float_pct", "penetration_mean_mm", "jitter_mps2",
+                  "normal_angle_error_deg", "camera_height_error_pct"),
+    "video": ("mpjpe_2d_px", "foot_skate_pct", "float_pct", "penetration_mean_mm", "jitter_mps2",
+              "camera_height_m", "camera_tilt_deg"),
+}
+KIND_TITLES = {"mocap": "Motion capture through the detector simulator",
+               "multiview": "Multi-view reference, scored from each single view",
+               "video": "Real videos (no 3d ground truth)"}
+
+
+def _values(result: dict) -> dict[str, float]:
+    return {**result.get("metrics", {}), **result.get("ground", {})}
+
+
+def aggregate(results: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
+    """kind -> variant -> mean of every numeric figure over the clips (NaNs ignored)."""
+    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for r in results:
+        groups[(r["kind"], r["variant"])].append(r)
+    out: dict[str, dict[str, dict[str, float]]] = defaultdict(dict)
+    for (kind, variant), rows in groups.items():
+        sums: dict[str, list[float]] = defaultdict(list)
+        for r in rows:
+            for key, value in _values(r).items():
+                if isinstance(value, (int, float)) and math.isfinite(value):
+                    sums[key].append(float(value))
+            for stage, seconds in r.get("time_s", {}).items():
+                sums[f"time_s.{stage}"].append(float(seconds))
+        agg = {key: sum(v) / len(v) for key, v in sums.items()}
+        agg["clips"] = len(rows)
+        out[kind][variant] = agg
+    return dict(out)
+
+
+def _fmt(value, spec: str) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "–"
+    return spec.format(value)
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(row) + " |" for row in rows]
+    return lines
+
+
+def _columns(kind: str) -> list[tuple[str, str, str]]:
+    keys = KIND_COLUMNS[kind]
+    return [c for c in COLUMNS if c[1] in keys]
+
+
+def _time(values: dict, prefix: str = "") -> str:
+    total = sum(v for k, v in values.items() if k.startswith(prefix))
+    return f"{total:.1f}"
+
+
+def render_markdown(doc: dict) -> str:
+    """The results as markdown: one Table-2-shaped table per kind, then per-clip tables."""
+    lines = ["# physpose benchmark", "",
+             f"Command: `{doc['command']}`  ", f"Machine: {doc['machine']}", ""]
+    for message in doc.get("skipped", []):
+        lines.append(f"- skipped: {message}")
+    for failure in doc.get("failures", []):
+        lines.append(f"- failed: {failure['variant']} on {failure['clip']}: {failure['error']}")
+    lines.append("")
+    for kind, by_variant in doc["aggregate"].items():
+        cols = _columns(kind)
+        lines += [f"## {KIND_TITLES[kind]}", "",
+                  f"Mean over {max(a['clips'] for a in by_variant.values())} clip(s). "
+                  "Time: seconds per clip (variant only / with observation).", ""]
+        rows = [[variant] + [_fmt(agg.get(key), spec) for _, key, spec in cols]
+                + [_fmt(agg.get("time_s.variant"), "{:.2f}") + " / " + _time(agg, "time_s.")]
+                for variant, agg in by_variant.items()]
+        lines += _table(["Variant"] + [c[0] for c in cols] + ["Time (s)"], rows) + [""]
+    for kind in doc["aggregate"]:
+        cols = _columns(kind)
+        lines += [f"### Per clip: {kind}", ""]
+        rows = []
+        for r in doc["results"]:
+            if r["kind"] == kind:
+                values = _values(r)
+                rows.append([r["clip"], r["variant"], str(r["frames"])]
+                            + [_fmt(values.get(key), spec) for _, key, spec in cols]
+                            + [_fmt(r["time_s"].get("variant"), "{:.2f}")])
+        lines += _table(["Clip", "Variant", "Frames"] + [c[0] for c in cols] + ["Time (s)"],
+                        rows) + [""]
+    return "\n".join(lines)
+
+
+def write_results(doc: dict, out_dir: str | Path) -> tuple[Path, Path]:
+    """Write `results.json` and `results.md` into out_dir; returns their paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    json_path, md_path = out / "results.json", out / "results.md"
+    tmp = json_path.with_suffix(".json.partial")
+    tmp.write_text(json.dumps(_finite(doc), indent=1, allow_nan=False, default=_jsonable) + "\n")
+    tmp.replace(json_path)
+    md_path.write_text(render_markdown(doc) + "\n")
+    return json_path, md_path
+
+
+def _finite(value):
+    """A copy with non-finite floats replaced by None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _jsonable(value):
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")

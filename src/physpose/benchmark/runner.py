@@ -1,0 +1,112 @@
+"""Run variants over benchmark material and collect per-clip figures and timings."""
+
+from __future__ import annotations
+
+import os
+import platform
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+
+from physpose.benchmark.material import Clip, Material, MaterialConfig, load_clips
+from physpose.benchmark.report import aggregate
+from physpose.benchmark.scoring import score_clip, truth_record
+from physpose.benchmark.variants import get_variant
+from physpose.errors import PhysposeError
+
+
+@dataclass(frozen=True)
+class BenchmarkConfig:
+    """Which variants run, on material prepared how."""
+
+    variants: tuple[str, ...] = ("baseline",)
+    material: MaterialConfig = MaterialConfig()
+
+
+def _log(message: str) -> None:
+    print(message, file=sys.stderr, flush=True)
+
+
+def run_variant(name: str, clip: Clip) -> dict:
+    """Run one variant on one clip and score it; returns the clip's result record."""
+    fn = get_variant(name)
+    start = time.perf_counter()
+    recon = fn(clip.observations, clip.context)
+    variant_s = time.perf_counter() - start
+    if recon.num_frames != clip.observations.num_frames:
+        raise PhysposeError(f"variant {name} returned {recon.num_frames} frames for "
+                            f"{clip.observations.num_frames} observed", path=clip.source,
+                            remedy="a variant must reconstruct every observed frame")
+    start = time.perf_counter()
+    metrics, ground = score_clip(clip, recon)
+    stages = {stage: float(s) for stage, s in recon.meta.get("timings_s", {}).items()}
+    return {
+        "variant": name, "kind": clip.kind, "clip": clip.name, "source": clip.source,
+        "frames": clip.observations.num_frames, "fps": clip.observations.fps,
+        "metrics": metrics, "ground": ground,
+        "time_s": {**clip.timings_s, "variant": variant_s, "score": time.perf_counter() - start},
+        "variant_stages_s": stages,  # the variant's own breakdown of its time
+    }
+
+
+def run_clips(clips: Sequence[Clip], variants: Sequence[str],
+              log: Callable[[str], None] = _log) -> tuple[list[dict], list[dict]]:
+    """(results, failures) of every variant on every clip, plus each truth's own row."""
+    results: list[dict] = []
+    failures: list[dict] = []
+    for clip in clips:
+        if clip.truth is not None:
+            results.append(truth_record(clip))
+        for name in variants:
+            try:
+                record = run_variant(name, clip)
+            except PhysposeError as err:
+                failures.append({"variant": name, "clip": clip.name, "error": str(err)})
+                log(f"benchmark: {name} on {clip.name} failed: {err}")
+                continue
+            results.append(record)
+            log(f"benchmark: {name} on {clip.kind} {clip.name}: " + ", ".join(
+                f"{k}={v:.3g}" for k, v in record["metrics"].items() if v is not None))
+    return results, failures
+
+
+def results_document(results: list[dict], failures: list[dict], cfg: BenchmarkConfig, *,
+                     skipped: Sequence[str] = (), command: str = "") -> dict:
+    """The document written to results.json (and rendered into results.md)."""
+    return {
+        "command": command,
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared with other work)",
+        "config": asdict(cfg),
+        "skipped": list(skipped),
+        "failures": failures,
+        "results": results,
+        "aggregate": aggregate(results),
+    }
+
+
+def run_benchmark(materials: Sequence[Material], cfg: BenchmarkConfig = BenchmarkConfig(), *,
+                  skipped: Sequence[str] = (), command: str = "",
+                  log: Callable[[str], None] = _log) -> dict:
+    """Run every variant of `cfg` on every clip of `materials`; returns the results document.
+
+    Problems a user can fix on one clip (PhysposeError: unreadable file, person not found, a
+    variant refusing its input) are recorded under "failures" and the run goes on; anything
+    else is a bug and propagates.
+    """
+    for name in cfg.variants:
+        get_variant(name)  # unknown names fail before any work is done
+    results: list[dict] = []
+    failures: list[dict] = []
+    for material in materials:
+        log(f"benchmark: preparing {material.kind} {material.path}")
+        try:
+            clips = load_clips(material, cfg.material)
+        except PhysposeError as err:
+            failures.append({"variant": "-", "clip": str(material.path), "error": str(err)})
+            log(f"benchmark: failed: {err}")
+            continue
+        done, failed = run_clips(clips, cfg.variants, log)
+        results += done
+        failures += failed
+    return results_document(results, failures, cfg, skipped=skipped, command=command)

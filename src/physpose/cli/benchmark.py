@@ -1,0 +1,94 @@
+"""`physpose benchmark`: score pipeline variants on motion capture, multi-view and real videos."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from physpose.benchmark import (BenchmarkConfig, Material, MaterialConfig, available_variants,
+                                run_benchmark, shared_material, write_results)
+from physpose.multiview.reference import find_multiview_files
+from physpose.benchmark.report import render_markdown
+from physpose.errors import PhysposeError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "benchmark", help="score pipeline variants (paper's Table 2 metrics)",
+        description="Run pipeline variants on motion-capture clips (through the detector "
+                    "simulator), calibrated multi-view folders (each view scored against the "
+                    "triangulated reference) and real videos; write results.json and "
+                    "results.md. Without clip arguments the shared material is used.")
+    p.add_argument("--mocap", action="append", default=[], metavar="FILE", type=Path,
+                   help="BVH, AMC (with its .asf beside it) or DeepMimic clip; repeatable")
+    p.add_argument("--multiview", action="append", default=[], metavar="DIR", type=Path,
+                   help="folder with videos/ and calibration/*.qca.txt (pose2sim layout); "
+                        "repeatable")
+    p.add_argument("--video", action="append", default=[], metavar="FILE", type=Path,
+                   help="real video without ground truth; repeatable")
+    p.add_argument("--variant", action="append", default=[], metavar="NAME",
+                   help="variant to run (repeatable; default: baseline). "
+                        "`--variant list` prints the registered names")
+    p.add_argument("--max-seconds", type=float, default=MaterialConfig.max_seconds, metavar="S",
+                   help="clip length cap in seconds (default: %(default)s, the paper's "
+                        "100 frames at 25 fps)")
+    p.add_argument("--fps", type=float, default=MaterialConfig.fps,
+                   help="analysis rate in Hz (videos use the nearest rate that is a whole "
+                        "fraction of theirs; default: %(default)s)")
+    p.add_argument("--known-extrinsics", action="store_true",
+                   help="also give variants the camera pose (ground figures are then trivial)")
+    p.add_argument("--known-height", action="store_true",
+                   help="give variants the person's stature when the material has it (mocap)")
+    p.add_argument("--seed", type=int, default=0, help="detector simulator seed")
+    p.add_argument("--out", type=Path, help="output folder for results.json and results.md")
+    p.set_defaults(func=run)
+
+
+def _materials(args: argparse.Namespace) -> tuple[list[Material], list[str]]:
+    given = ([Material("mocap", p) for p in args.mocap]
+             + [Material("multiview", p) for p in args.multiview]
+             + [Material("video", p) for p in args.video])
+    for m in given:
+        if not m.path.exists():
+            raise PhysposeError(f"{m.kind} input not found", path=m.path, remedy="check the path")
+        if m.kind == "multiview":
+            find_multiview_files(m.path)  # layout errors before any long work
+        elif not m.path.is_file():
+            raise PhysposeError(f"{m.kind} input is not a file", path=m.path)
+    return (given, []) if given else shared_material()
+
+
+def run(args: argparse.Namespace) -> int:
+    variants = args.variant or ["baseline"]
+    if "list" in variants:
+        print("\n".join(available_variants()))
+        return 0
+    if args.out is None:
+        raise PhysposeError("no output folder", remedy="pass --out DIR")
+    known = available_variants()
+    unknown = [v for v in variants if v not in known]
+    if unknown:
+        raise PhysposeError(f"unknown variant(s) {', '.join(unknown)}",
+                            remedy=f"choose from: {', '.join(known)}")
+    materials, skipped = _materials(args)
+    for message in skipped:
+        print(f"benchmark: skipping: {message}", file=sys.stderr)
+    if not materials:
+        raise PhysposeError("no benchmark material found",
+                            remedy="pass --mocap/--multiview/--video or fetch the shared data")
+    cfg = BenchmarkConfig(variants=tuple(dict.fromkeys(variants)),
+                          material=MaterialConfig(fps=args.fps, max_seconds=args.max_seconds,
+                                                  known_extrinsics=args.known_extrinsics,
+                                                  known_height=args.known_height,
+                                                  seed=args.seed))
+    command = shlex.join(["physpose", *sys.argv[1:]]) if sys.argv[1:2] == ["benchmark"] \
+        else "physpose benchmark"
+    doc = run_benchmark(materials, cfg, skipped=skipped, command=command)
+    json_path, md_path = write_results(doc, args.out)
+    print(render_markdown(doc))
+    print(f"wrote {json_path}\nwrote {md_path}")
+    if doc["failures"] and not doc["results"]:
+        return 1
+    return 0

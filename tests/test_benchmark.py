@@ -1,0 +1,238 @@
+"""The benchmark runner end to end on a tiny synthetic walk, with oracle and failing variants."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from physpose.benchmark import VARIANTS, get_variant, register_variant, write_results
+from physpose.benchmark.baseline import level_ground_frame, solve_root_translation
+from physpose.benchmark.material import Clip, MaterialConfig, mocap_clip, uniform_fps
+from physpose.benchmark.report import aggregate
+from physpose.benchmark.runner import BenchmarkConfig, results_document, run_clips
+from physpose.benchmark.scoring import TRUTH_ROW
+from physpose.cli import main
+from physpose.errors import PhysposeError
+from physpose.joints import JOINT_INDEX, JOINT_NAMES, joints_from_landmarks
+from physpose.metrics import transform_points
+from physpose.mocap import MocapClip
+from physpose.reconstruction import Reconstruction
+
+FPS = 25.0
+
+
+def _walk(seconds: float = 1.2) -> MocapClip:
+    """A stick figure walking along +x at 1 m/s with swinging legs, z up, feet on z = 0."""
+    t = np.arange(int(seconds * FPS)) / FPS
+    phase = 2 * np.pi * 1.8 * t
+    pts: dict[str, np.ndarray] = {}
+    root = np.stack([t, 0 * t, 0.95 + 0 * t], 1)
+    for sign, s in ((1, "l"), (-1, "r")):
+        swing = sign * 0.2 * np.sin(phase)[:, None] * np.array([1.0, 0, 0])
+        lift = np.maximum(0, sign * np.cos(phase))[:, None] * np.array([0, 0, 0.08])
+        side = np.array([0, sign * 0.1, 0])
+        pts[f"{s}_hip"] = root + side
+        pts[f"{s}_knee"] = root + side + 0.5 * swing + lift + [0.03, 0, -0.45]
+        pts[f"{s}_ankle"] = root + side + swing + lift + [0, 0, -0.87]
+        pts[f"{s}_heel"] = pts[f"{s}_ankle"] + [-0.05, 0, -0.06]
+        pts[f"{s}_toe"] = pts[f"{s}_ankle"] + [0.15, 0, -0.07]
+        pts[f"{s}_shoulder"] = root + [0, sign * 0.18, 0.5]
+        pts[f"{s}_elbow"] = pts[f"{s}_shoulder"] - 0.5 * swing + [0, 0, -0.3]
+        pts[f"{s}_wrist"] = pts[f"{s}_elbow"] - 0.5 * swing + [0.05, 0, -0.27]
+    head = root + [0, 0, 0.67]
+    pelvis, thorax = root, root + [0, 0, 0.5]
+    trunk = {"pelvis": pelvis, "thorax": thorax, "spine": 0.5 * (pelvis + thorax), "head": head,
+             "neck": 0.5 * (thorax + head)}
+    joints = np.stack([trunk.get(n, pts.get(n)) for n in JOINT_NAMES], 1)
+    n = len(t)
+    hand = np.array([[0, 1.0, 0], [0, 0, 1.0], [-1.0, 0, 0]]).T  # fingers down, thumb forward
+    return MocapClip(name="walk", source="synthetic_walk.bvh", fps=FPS, joints=joints,
+                     head_top=head + [0, 0, 0.12], head_rot=np.tile(np.eye(3), (n, 1, 1)),
+                     hand_rot=np.tile(hand, (n, 2, 1, 1)), source_fps=FPS, floor_offset=0.0)
+
+
+@pytest.fixture(scope="module")
+def clip() -> Clip:
+    return mocap_clip(_walk(), MaterialConfig(max_seconds=1.0), name="walk")
+
+
+def _oracle(truth_clip: Clip, yaw_deg: float = 40.0):
+    """A variant returning the truth in a world turned and shifted about z (with its camera)."""
+    a = np.radians(yaw_deg)
+    T_old2new = np.eye(4)
+    T_old2new[:3, :3] = [[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]]
+    T_old2new[:3, 3] = [3.0, -1.0, 0.0]
+
+    def oracle(obs, context):
+        joints = transform_points(T_old2new, truth_clip.truth.joints)
+        return Reconstruction(
+            fps=obs.fps, joint_names=JOINT_NAMES, joints_kinematic=joints,
+            camera_K=truth_clip.truth.K,
+            camera_T_world2cam=truth_clip.truth.T_world2cam @ np.linalg.inv(T_old2new),
+            landmarks_kinematic=np.zeros((obs.num_frames, 33, 3)),
+            keypoints2d=obs.keypoints2d)
+    return oracle
+
+
+def test_clip_is_cropped_and_carries_the_known_camera(clip):
+    assert clip.observations.num_frames == 25
+    assert clip.truth.joints.shape == (25, len(JOINT_NAMES), 3)
+    np.testing.assert_array_equal(clip.context.camera_K, clip.truth.K)
+    assert clip.context.camera_T_world2cam is None and clip.context.person_height is None
+
+
+def test_oracle_scores_zero_whatever_its_world_yaw(clip, monkeypatch):
+    monkeypatch.setitem(VARIANTS, "test_oracle", _oracle(clip))
+    results, failures = run_clips([clip], ["test_oracle"], log=lambda m: None)
+    assert not failures
+    truth_row, row = results
+    assert truth_row["variant"] == TRUTH_ROW and "mpjpe_g_mm" not in truth_row["metrics"]
+    m, g = row["metrics"], row["ground"]
+    for key in ("mpjpe_g_mm", "mpjpe_mm", "mpjpe_pa_mm", "velocity_error_mps", "mpjpe_2d_px"):
+        assert m[key] == pytest.approx(0.0, abs=1e-6), key
+    assert g["normal_angle_error_deg"] == pytest.approx(0.0, abs=1e-4)
+    assert g["camera_height_error_pct"] == pytest.approx(0.0, abs=1e-6)
+    assert m["foot_skate_pct"] == truth_row["metrics"]["foot_skate_pct"]
+
+
+def test_a_displaced_estimate_scores_its_displacement(clip, monkeypatch):
+    oracle = _oracle(clip, yaw_deg=0.0)
+
+    def lifted(obs, context):  # every joint 10 cm too high except the first frame's offset
+        rec = oracle(obs, context)
+        joints = rec.joints_kinematic.copy()
+        joints[1:, :, 2] += 0.1
+        return rec.replace(joints_kinematic=joints)
+
+    monkeypatch.setitem(VARIANTS, "test_lifted", lifted)
+    (_, row), _ = run_clips([clip], ["test_lifted"], log=lambda m: None)
+    frames = clip.observations.num_frames
+    assert row["metrics"]["mpjpe_g_mm"] == pytest.approx(100 * (frames - 1) / frames, rel=1e-6)
+    assert row["metrics"]["mpjpe_mm"] == pytest.approx(0.0, abs=1e-6)
+    assert row["metrics"]["mpjpe_2d_px"] > 1
+
+
+def test_baseline_on_the_simulated_walk(clip):
+    (_, row), failures = run_clips([clip], ["baseline"], log=lambda m: None)
+    assert not failures
+    m = row["metrics"]
+    assert 0 < m["mpjpe_pa_mm"] <= m["mpjpe_mm"] < 250
+    assert m["mpjpe_2d_px"] < 40
+    assert row["time_s"]["variant"] > 0 and "simulate" in row["time_s"]
+    # the level-camera guess is off by the virtual camera's downward pitch
+    assert 1 < row["ground"]["normal_angle_error_deg"] < 45
+
+
+def test_video_kind_scores_against_detections(clip, monkeypatch):
+    video = Clip(kind="video", name="v", source="v.mp4", observations=clip.observations,
+                 context=clip.context, truth=None, timings_s={"observe": 0.0})
+    K = clip.truth.K
+
+    def on_rays(obs, context):  # puts every joint 3 m away along the ray of its detection
+        uv = joints_from_landmarks(obs.keypoints2d[..., :2])
+        rays = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], -1) @ np.linalg.inv(K).T
+        return Reconstruction(fps=obs.fps, joint_names=JOINT_NAMES, joints_kinematic=3 * rays,
+                              camera_K=K, camera_T_world2cam=np.eye(4),
+                              landmarks_kinematic=np.zeros((obs.num_frames, 33, 3)),
+                              keypoints2d=obs.keypoints2d)
+
+    monkeypatch.setitem(VARIANTS, "test_rays", on_rays)
+    (row,), _ = run_clips([video], ["test_rays"], log=lambda m: None)
+    assert row["metrics"]["mpjpe_2d_px"] == pytest.approx(0.0, abs=1e-6)
+    assert "mpjpe_g_mm" not in row["metrics"] and "normal_angle_error_deg" not in row["ground"]
+
+
+def test_failures_are_recorded_and_bugs_propagate(clip, monkeypatch):
+    def refuses(obs, context):
+        raise PhysposeError("cannot handle this clip")
+
+    def buggy(obs, context):
+        raise ZeroDivisionError
+
+    monkeypatch.setitem(VARIANTS, "test_refuses", refuses)
+    monkeypatch.setitem(VARIANTS, "test_buggy", buggy)
+    results, failures = run_clips([clip], ["test_refuses"], log=lambda m: None)
+    assert [r["variant"] for r in results] == [TRUTH_ROW]
+    assert failures[0]["variant"] == "test_refuses" and "cannot handle" in failures[0]["error"]
+    with pytest.raises(ZeroDivisionError):
+        run_clips([clip], ["test_buggy"], log=lambda m: None)
+
+
+def test_results_files(clip, tmp_path, monkeypatch):
+    monkeypatch.setitem(VARIANTS, "test_oracle", _oracle(clip))
+    results, failures = run_clips([clip], ["baseline", "test_oracle"], log=lambda m: None)
+    doc = results_document(results, failures, BenchmarkConfig(variants=("baseline",)),
+                           skipped=["no videos"], command="physpose benchmark --out x")
+    json_path, md_path = write_results(doc, tmp_path / "out")
+    loaded = json.loads(json_path.read_text())
+    assert loaded["aggregate"]["mocap"]["test_oracle"]["mpjpe_g_mm"] == pytest.approx(0, abs=1e-6)
+    assert set(loaded["aggregate"]["mocap"]) == {TRUTH_ROW, "baseline", "test_oracle"}
+    md = md_path.read_text()
+    assert "| Variant | MPJPE-G (mm) | MPJPE (mm) | MPJPE-PA (mm) | MPJPE-2d (px)" in md
+    assert "| baseline |" in md and "| walk | test_oracle | 25 |" in md
+    assert "skipped: no videos" in md
+
+
+def test_aggregate_means_over_clips_ignoring_missing_values():
+    rows = [{"kind": "video", "variant": "v", "metrics": {"a": 1.0, "b": float("nan")},
+             "ground": {}, "time_s": {"variant": 2.0}},
+            {"kind": "video", "variant": "v", "metrics": {"a": 3.0, "b": 4.0}, "ground": {},
+             "time_s": {"variant": 4.0}}]
+    agg = aggregate(rows)["video"]["v"]
+    assert agg == {"a": 2.0, "b": 4.0, "time_s.variant": 3.0, "clips": 2}
+
+
+def test_baseline_translation_is_exact_without_noise():
+    rng = np.random.default_rng(0)
+    world = rng.uniform(-0.4, 0.4, (6, 33, 3))
+    world[:, 23:25] -= world[:, 23:25].mean(1, keepdims=True)
+    t_true = np.stack([rng.uniform(-1, 1, 6), rng.uniform(-0.5, 0.5, 6), rng.uniform(3, 6, 6)], 1)
+    K = np.array([[1200.0, 0, 640], [0, 1200.0, 360], [0, 0, 1]])
+    cam = world + t_true[:, None]
+    uv = cam @ K.T
+    kp = np.concatenate([uv[..., :2] / uv[..., 2:], np.ones((6, 33, 1))], -1)
+    kp[2, :31, 2] = 0.0  # only two confident landmarks: frame cannot be placed
+    t, ok = solve_root_translation(world, kp, K)
+    assert ok.tolist() == [True, True, False, True, True, True]
+    np.testing.assert_allclose(t[ok], t_true[ok], atol=1e-6)
+    assert np.isnan(t[2]).all()
+
+
+def test_level_ground_frame_puts_the_lowest_feet_on_the_floor():
+    lm = np.zeros((10, 33, 3))
+    lm[..., 1] = 1.5            # camera y points down: everything 1.5 m below the camera
+    lm[..., 2] = 4.0
+    T = level_ground_frame(lm, percentile=10)
+    world = transform_points(np.linalg.inv(T), lm)
+    np.testing.assert_allclose(world[..., 2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(np.linalg.inv(T)[:3, 3], [0, 0, 1.5])
+
+
+def test_registry():
+    assert get_variant("baseline") is VARIANTS["baseline"]
+    with pytest.raises(PhysposeError, match="unknown variant 'nope'.*baseline"):
+        get_variant("nope")
+    with pytest.raises(ValueError, match="already registered"):
+        register_variant("baseline", lambda obs, ctx: None)
+    assert register_variant("baseline", VARIANTS["baseline"]) is VARIANTS["baseline"]
+
+
+def test_uniform_fps():
+    assert uniform_fps(60.0, 25.0) == 30.0
+    assert uniform_fps(23.976, 25.0) == 23.976
+    assert uniform_fps(100.0, 25.0) == 25.0
+
+
+def test_cli_errors(tmp_path, capsys):
+    assert main(["benchmark", "--variant", "nope", "--out", str(tmp_path)]) == 2
+    assert "unknown variant(s) nope" in capsys.readouterr().err
+    assert main(["benchmark", "--mocap", str(tmp_path / "x.bvh"), "--out", str(tmp_path)]) == 2
+    assert "mocap input not found" in capsys.readouterr().err
+    assert main(["benchmark", "--multiview", str(tmp_path), "--out", str(tmp_path)]) == 2
+    assert "calibration" in capsys.readouterr().err
+    assert main(["benchmark", "--variant", "list"]) == 0
+    assert "baseline" in capsys.readouterr().out.split()
+    assert main(["benchmark", "--video", str(tmp_path)]) == 2
+    assert "--out" in capsys.readouterr().err
