@@ -7,9 +7,18 @@ import dataclasses
 import numpy as np
 import pytest
 
-from physpose.detector_sim import (DetectorSimConfig, look_at_camera, simulate_detections,
-                                   synthesize_landmarks)
-from physpose.joints import JOINT_INDEX, JOINT_NAMES, LANDMARK_INDEX, joints_from_landmarks
+from physpose.detector_sim import (
+    DetectorSimConfig,
+    look_at_camera,
+    simulate_detections,
+    synthesize_landmarks,
+)
+from physpose.joints import (
+    JOINT_INDEX,
+    JOINT_NAMES,
+    LANDMARK_INDEX,
+    joints_from_landmarks,
+)
 from physpose.metrics import project
 from physpose.mocap import MocapClip
 

@@ -10,7 +10,12 @@ import pytest
 
 from physpose.errors import PhysposeError
 from physpose.mocap import body_height, bone_lengths, load_mocap, stance_foot_heights
-from physpose.mocap.asf_amc import asf_forward_kinematics, find_asf, parse_amc, parse_asf
+from physpose.mocap.asf_amc import (
+    asf_forward_kinematics,
+    find_asf,
+    parse_amc,
+    parse_asf,
+)
 from physpose.mocap.bvh import bvh_forward_kinematics, parse_bvh
 from physpose.mocap.deepmimic import character_stature
 from physpose.mocap.rotations import axis_rotation
@@ -77,7 +82,8 @@ def write_bvh(path: Path, rows: list[list[float]], unit: float = 1.0) -> Path:
 ROOT Hips
 {{
   OFFSET 0 0 0
-  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation{_bvh_leg("Left", 0.1)}{_bvh_leg("Right", -0.1)}
+  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\
+{_bvh_leg("Left", 0.1)}{_bvh_leg("Right", -0.1)}
   JOINT Spine
   {{
     OFFSET 0 0.1 0
@@ -118,7 +124,7 @@ Frame Time: 0.1
 
 def bvh_rows(n: int = 8) -> list[list[float]]:
     rows = [[0.0] * N_BVH_CHANNELS for _ in range(n)]
-    for k, r in enumerate(rows):
+    for r in rows:
         r[:3] = [0.0, 0.95, 0.0]
     if n >= 3:
         rows[1][6 + 3 + 2] = 90.0   # LeftLeg Xrotation (channels: Z Y X): knee flexed 90 deg
@@ -254,7 +260,7 @@ def test_asf_forward_kinematics_by_hand(tmp_path):
     unit = 0.0254 / 0.45
     assert asf.bones["lfemur"].length == pytest.approx(8.0 * unit)
     motion = parse_amc(write_amc(tmp_path / "s.amc", n=2, femur_rx=30.0, tibia_rx=90.0), asf)
-    names, parents, pos, rot = asf_forward_kinematics(asf, motion)
+    names, parents, pos, _ = asf_forward_kinematics(asf, motion)
     hip, knee, ankle = (names.index(n) for n in ("lfemur", "ltibia", "lfoot"))
     assert names[parents[knee]] == "lfemur"
     assert pos[0, 0] == pytest.approx([0.0, 17 * unit, 0.0])
@@ -297,7 +303,8 @@ def test_find_asf_rules(tmp_path):
 
 def test_asf_amc_errors_name_file_and_line(tmp_path):
     asf = write_asf(tmp_path / "s.asf")
-    text = asf.read_text().replace("direction 0 -1 0\n    length 7.5", "direction 0 -1 0\n    length x")
+    text = asf.read_text().replace("direction 0 -1 0\n    length 7.5",
+                                   "direction 0 -1 0\n    length x")
     (tmp_path / "bad.asf").write_text(text)
     with pytest.raises(PhysposeError, match=r"bad\.asf: line \d+: 'x' is not a number"):
         parse_asf(tmp_path / "bad.asf")

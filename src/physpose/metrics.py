@@ -125,7 +125,7 @@ def velocity_error(est: np.ndarray, gt: np.ndarray, fps: float, root: int = 0) -
     """
     _check(est, gt)
     est = align_first_frame(est, gt, root)
-    speed = lambda x: np.linalg.norm(np.diff(x, axis=0), axis=-1) * fps  # noqa: E731
+    speed = lambda x: np.linalg.norm(np.diff(x, axis=0), axis=-1) * fps
     return float(np.abs(speed(gt) - speed(est)).mean())
 
 

@@ -12,12 +12,27 @@ from pathlib import Path
 from physpose.errors import PhysposeError
 from physpose.mocap.asf_amc import load_amc
 from physpose.mocap.bvh import load_bvh
-from physpose.mocap.common import (BONES, MocapClip, body_height, bone_lengths,
-                                   stance_foot_heights)
+from physpose.mocap.common import (
+    BONES,
+    MocapClip,
+    body_height,
+    bone_lengths,
+    stance_foot_heights,
+)
 from physpose.mocap.deepmimic import load_deepmimic
 
-__all__ = ["MocapClip", "load_mocap", "load_bvh", "load_amc", "load_deepmimic", "body_height",
-           "bone_lengths", "stance_foot_heights", "BONES", "MOCAP_SUFFIXES"]
+__all__ = [
+    "BONES",
+    "MOCAP_SUFFIXES",
+    "MocapClip",
+    "body_height",
+    "bone_lengths",
+    "load_amc",
+    "load_bvh",
+    "load_deepmimic",
+    "load_mocap",
+    "stance_foot_heights",
+]
 
 MOCAP_SUFFIXES = (".bvh", ".amc", ".txt", ".json")  # .txt/.json: DeepMimic clips
 

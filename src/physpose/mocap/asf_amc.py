@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from physpose.errors import PhysposeError
-from physpose.mocap.common import MocapClip, finish_clip
+from physpose.mocap.common import MocapClip, finish_clip, line_error, read_lines
 from physpose.mocap.rotations import euler_matrix
 from physpose.mocap.skeleton import motion_from_tree
 
@@ -77,13 +77,10 @@ def _sections(lines: list[str]) -> list[tuple[str, int, list[tuple[int, list[str
 def parse_asf(path: str | Path) -> AsfSkeleton:
     """Parse an ASF skeleton; malformed input raises PhysposeError naming the file and line."""
     path = Path(path)
-    try:
-        lines = path.read_text(errors="replace").splitlines()
-    except OSError as exc:
-        raise PhysposeError(f"cannot read ASF file ({exc})", path=path) from None
+    lines = read_lines(path, "ASF")
 
     def fail(lineno: int, problem: str):
-        raise PhysposeError(f"line {lineno}: {problem}", path=path, remedy=_ASF_REMEDY)
+        raise line_error(path, lineno, problem, _ASF_REMEDY)
 
     def num(tok: str, lineno: int) -> float:
         try:
@@ -202,20 +199,17 @@ def parse_asf(path: str | Path) -> AsfSkeleton:
 def parse_amc(path: str | Path, skeleton: AsfSkeleton) -> dict[str, np.ndarray]:
     """Per-bone motion values (T, len(dof)) in file units/degrees, plus "root" (T, len(order))."""
     path = Path(path)
-    try:
-        lines = path.read_text(errors="replace").splitlines()
-    except OSError as exc:
-        raise PhysposeError(f"cannot read AMC file ({exc})", path=path) from None
+    lines = read_lines(path, "AMC")
 
     def fail(lineno: int, problem: str):
-        raise PhysposeError(f"line {lineno}: {problem}", path=path, remedy=_AMC_REMEDY)
+        raise line_error(path, lineno, problem, _AMC_REMEDY)
 
     width = {b.name: len(b.dof) for b in skeleton.bones.values()}
     width["root"] = len(skeleton.root_order)
     frames: list[dict[str, list[float]]] = []
     for i, line in enumerate(lines):
         s = line.strip()
-        if not s or s.startswith("#") or s.startswith(":"):
+        if not s or s.startswith(("#", ":")):
             continue
         tokens = s.split()
         if len(tokens) == 1 and tokens[0].isdigit():
@@ -250,7 +244,10 @@ def parse_amc(path: str | Path, skeleton: AsfSkeleton) -> dict[str, np.ndarray]:
 
 def asf_forward_kinematics(skeleton: AsfSkeleton, motion: dict[str, np.ndarray]
                            ) -> tuple[list[str], list[int], np.ndarray, np.ndarray]:
-    """Tree of bone starts (+ `<leaf>_end` nodes): names, parents, positions (T,N,3) m, rotations (T,N,3,3)."""
+    """The skeleton as a tree of bone starts plus `<leaf>_end` nodes.
+
+    Returns names, parents, positions (T, N, 3) m and global rotations (T, N, 3, 3).
+    """
     t = len(motion["root"])
 
     def rotation(values: np.ndarray, dof: tuple[str, ...]) -> np.ndarray:

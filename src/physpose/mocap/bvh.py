@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from physpose.errors import PhysposeError
-from physpose.mocap.common import MocapClip, finish_clip
+from physpose.mocap.common import MocapClip, finish_clip, line_error, read_lines
 from physpose.mocap.rotations import euler_matrix
 from physpose.mocap.skeleton import motion_from_tree
 
@@ -41,13 +41,10 @@ class BvhFile:
 def parse_bvh(path: str | Path) -> BvhFile:
     """Parse a BVH file; malformed input raises PhysposeError naming the file and line."""
     path = Path(path)
-    try:
-        lines = path.read_text(errors="replace").splitlines()
-    except OSError as exc:
-        raise PhysposeError(f"cannot read BVH file ({exc})", path=path) from None
+    lines = read_lines(path, "BVH")
 
-    def fail(lineno: int, problem: str) -> None:
-        raise PhysposeError(f"line {lineno}: {problem}", path=path, remedy=_REMEDY)
+    def fail(lineno: int, problem: str):
+        raise line_error(path, lineno, problem, _REMEDY)
 
     def floats(tokens: list[str], lineno: int, count: int) -> np.ndarray:
         if len(tokens) != count:

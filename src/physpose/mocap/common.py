@@ -8,6 +8,7 @@ file's rate); `finish_clip` turns it into a `MocapClip`: z up, the floor at z = 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -21,7 +22,7 @@ SIDES = ("l", "r")
 LIMB_JOINTS = tuple(n for n in JOINT_NAMES if n[:2] in ("l_", "r_"))
 ANATOMICAL_POINTS = LIMB_JOINTS + ("head", "head_top")
 STILL_SPEED = 0.15       # m/s, a foot whose heel-toe midpoint moves slower than this stands still
-MIN_STILL_FRAMES = 10    # fewer still-foot frames than this: floor from FLOOR_PERCENTILE instead
+MIN_STILL_FRAMES = 3     # fewer still-foot samples than this: floor from FLOOR_PERCENTILE instead
 FLOOR_PERCENTILE = 5.0   # % of frames whose lowest sole point lies below that fallback floor
 HEIGHT_PERCENTILE = 95.0  # body height: this percentile of the head-top height ...
 STANDING_FOOT_HEIGHT = 0.03  # m, ... over frames where both feet are at most this high
@@ -85,6 +86,19 @@ class MocapClip:
     def joint(self, name: str) -> np.ndarray:
         """(T, 3) trajectory of one joint."""
         return self.joints[:, JOINT_INDEX[name]]
+
+
+def read_lines(path: Path, kind: str) -> list[str]:
+    """Text lines of a motion file; an unreadable file raises PhysposeError."""
+    try:
+        return path.read_text(errors="replace").splitlines()
+    except OSError as exc:
+        raise PhysposeError(f"cannot read {kind} file ({exc})", path=path) from None
+
+
+def line_error(path: Path, lineno: int, problem: str, remedy: str) -> PhysposeError:
+    """The error for a malformed line of a motion file."""
+    return PhysposeError(f"line {lineno}: {problem}", path=path, remedy=remedy)
 
 
 def infer_up_axis(points: dict[str, np.ndarray]) -> np.ndarray:

@@ -32,7 +32,10 @@ def euler_matrix(angles: np.ndarray, order: str) -> np.ndarray:
 
 
 def quat_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
-    """Rotation matrices of (not necessarily unit) quaternions. quat: (..., 4) w,x,y,z -> (..., 3, 3)."""
+    """Rotation matrices of (not necessarily unit) quaternions.
+
+    quat_wxyz: (..., 4) w, x, y, z -> (..., 3, 3).
+    """
     q = np.asarray(quat_wxyz, dtype=float)
     q = q / np.linalg.norm(q, axis=-1, keepdims=True)
     w, x, y, z = np.moveaxis(q, -1, 0)
@@ -53,7 +56,7 @@ def orthonormalize(mats: np.ndarray) -> np.ndarray:
 
 
 def frame_from_axes(primary: np.ndarray, secondary: np.ndarray) -> np.ndarray:
-    """Rotation whose first column is `primary` and whose second lies in the (primary, secondary) plane.
+    """Rotation with first column `primary`, second in the (primary, secondary) plane.
 
     primary, secondary: (..., 3) -> (..., 3, 3) with columns (x, y, z = x cross y).
     """

@@ -27,11 +27,11 @@ from physpose.errors import PhysposeError
 from physpose.mocap.common import SIDES, SkeletonMotion, infer_up_axis
 from physpose.mocap.rotations import frame_from_axes
 
-SOLE_BELOW_BALL = 0.045   # m; CMU ASF clips put the ball joint 4.3-6.4 cm above the lab floor in stance
-HEEL_FRACTION = 0.23      # heel-to-ankle distance / foot length (ankle axis ~20-25 % from the heel)
-HEAD_TOP_FALLBACK = 0.12  # m above the head joint when the tree has no head end (vertex-to-ear height)
+SOLE_BELOW_BALL = 0.045   # m; CMU ASF clips: ball joint 4.3-6.4 cm above the lab floor in stance
+HEEL_FRACTION = 0.23      # heel-to-ankle distance / foot length (ankle axis 20-25 % from the heel)
+HEAD_TOP_FALLBACK = 0.12  # m above the head joint if the tree has no head end (vertex to ear)
 _STANCE_SPEED = 0.2       # m/s, ball joint slower than this ...
-_STANCE_HEIGHT = 0.03     # m, ... and within this of its low (5th percentile) height counts as stance
+_STANCE_HEIGHT = 0.03     # m, ... and within this of its low (5th percentile) height: stance
 _MIN_STANCE_FRAMES = 5
 
 _KNEE_NAMES = ("knee", "leg", "lowerleg", "shin", "tibia", "calf")
@@ -181,8 +181,8 @@ def motion_from_tree(name: str, source: str, times: np.ndarray, names: list[str]
         wrist = _children(parents, elbow[s])[0]
         leaves = [k for k in _leaves_below(parents, wrist) if k != wrist]
         is_thumb = ["thumb" in "".join(norm[j] for j in _path(parents, wrist, k)) for k in leaves]
-        fingers = [k for k, t in zip(leaves, is_thumb) if not t]
-        thumbs = [k for k, t in zip(leaves, is_thumb) if t]
+        fingers = [k for k, t in zip(leaves, is_thumb, strict=True) if not t]
+        thumbs = [k for k, t in zip(leaves, is_thumb, strict=True) if t]
         w = pos[:, wrist]
         along = (pos[:, fingers].mean(axis=1) - w) if fingers else w - pos[:, elbow[s]]
         if thumbs:
