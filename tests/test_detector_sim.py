@@ -176,6 +176,20 @@ def test_far_side_landmarks_are_less_confident():
             conf[:, LANDMARK_INDEX[f"left_{part}"]].mean() - 0.2
 
 
+def test_landmarks_behind_the_torso_are_less_confident():
+    clip = walking_clip(speed=0.0)
+    joints = clip.joints.copy()
+    for side, y in (("l", 0.05), ("r", -0.05)):   # hands folded in front of the belly
+        joints[:, JOINT_INDEX[f"{side}_wrist"]] = (0.2, y, 1.1)
+    clip = dataclasses.replace(clip, joints=joints)
+    wrist = LANDMARK_INDEX["left_wrist"]
+    front = simulate_detections(clip, dataclasses.replace(NOISELESS, azimuth_deg=0.0))
+    back = simulate_detections(clip, dataclasses.replace(NOISELESS, azimuth_deg=180.0))
+    conf_front = front.observations.keypoints2d[:, wrist, 2].mean()
+    conf_back = back.observations.keypoints2d[:, wrist, 2].mean()
+    assert conf_back < conf_front - 0.3
+
+
 def test_outliers_and_swaps():
     clip = walking_clip(200, speed=0.0)
     sim = simulate_detections(clip, dataclasses.replace(NOISELESS, outlier_rate=0.1, seed=4))

@@ -125,6 +125,8 @@ class DetectorSimConfig:
     drift_time: float = DRIFT_TIME
     outlier_rate: float = OUTLIER_RATE
     swap_rate: float = SWAP_RATE
+    far_side_drop: float = FAR_SIDE_DROP     # confidence model: see the constants above
+    occluded_drop: float = OCCLUDED_DROP
     known_intrinsics: bool = False  # put K into the Observations (a calibrated camera)
     seed: int = 0
 
@@ -293,7 +295,7 @@ def simulate_detections(clip: MocapClip, cfg: DetectorSimConfig = DetectorSimCon
                + cfg.sigma_2d_drift * _drift(rng, (t, NUM_LANDMARKS, 2), clip.fps,
                                              cfg.drift_time))
     uv = uv_true + size * gain[..., None] * noise2d
-    conf = (_confidence_base()[None] - FAR_SIDE_DROP * far - OCCLUDED_DROP * occluded
+    conf = (_confidence_base()[None] - cfg.far_side_drop * far - cfg.occluded_drop * occluded
             + CONFIDENCE_JITTER * rng.standard_normal((t, NUM_LANDMARKS)))
 
     # World landmarks: hip-centred, camera axes; per clip a lean, a scale and a depth
