@@ -15,7 +15,7 @@ from physpose.benchmark.runner import BenchmarkConfig, results_document, run_cli
 from physpose.benchmark.scoring import TRUTH_ROW
 from physpose.cli import main
 from physpose.errors import PhysposeError
-from physpose.joints import JOINT_INDEX, JOINT_NAMES, joints_from_landmarks
+from physpose.joints import JOINT_NAMES, joints_from_landmarks
 from physpose.metrics import transform_points
 from physpose.mocap import MocapClip
 from physpose.reconstruction import Reconstruction

@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -193,8 +192,3 @@ def crop_mocap(clip: MocapClip, max_seconds: float) -> MocapClip:
         return clip
     return dataclasses.replace(clip, **{k: getattr(clip, k)[:n] for k in
                                         ("joints", "head_top", "head_rot", "hand_rot")})
-
-
-def iter_clips(materials: list[Material], cfg: MaterialConfig) -> Iterator[Clip]:
-    for material in materials:
-        yield from load_clips(material, cfg)

@@ -133,7 +133,8 @@ def view_error(ref: MultiviewReference, view: int) -> ViewError:
         rms3d_axes_mm=tuple(float(v) for v in np.sqrt((d3 ** 2).mean(axis=(0, 1)))),
         bias3d_axes_mm=tuple(float(v) for v in d3.mean(axis=(0, 1))),
         scale_ratio=float(np.median(size(mp) / size(ref_cam))),
-        depth_scale_ratio=float((mp[..., 2] * ref_cam[..., 2]).sum() / (ref_cam[..., 2] ** 2).sum()),
+        depth_scale_ratio=float((mp[..., 2] * ref_cam[..., 2]).sum()
+                                / (ref_cam[..., 2] ** 2).sum()),
         swap_rate_legs=_swap_rate(kp, ref2d, _SWAP_PARTS["legs"]),
         swap_rate_arms=_swap_rate(kp, ref2d, _SWAP_PARTS["arms"]))
 
@@ -170,6 +171,7 @@ def render_markdown(ref: MultiviewReference, errors: list[ViewError], command: s
         f"{v:.2f}" if isinstance(v, float) and abs(v) < 2 else
         f"{v:.1f}" if isinstance(v, float) else str(v) for v in row) + " |"
     p = pooled
+    image_h = errors[0].image_height_px
     lines = [
         "# MediaPipe Pose error on the multi-view reference", "",
         f"Produced by `{command}` (MediaPipe {ref.views[0].fps:g} fps input, "
@@ -194,9 +196,9 @@ def render_markdown(ref: MultiviewReference, errors: list[ViewError], command: s
              p["err2d_mean_px"], p["err2d_in_sample_median_px"], p["sigma2d_px"],
              p["sigma2d_white_px"], p["sigma2d_drift_px"], "", 100 * p["outlier_rate"],
              100 * p["swap_rate_legs"], 100 * p["swap_rate_arms"])), "",
-        f"Scaled to a 1080 px tall image with the same framing (x 1080/"
-        f"{errors[0].image_height_px}): median {p['err2d_median_px'] * 1080 / errors[0].image_height_px:.1f} px, "
-        f"sigma {p['sigma2d_px'] * 1080 / errors[0].image_height_px:.1f} px per coordinate. "
+        f"Scaled to a 1080 px tall image with the same framing (x 1080/{image_h}): median "
+        f"{p['err2d_median_px'] * 1080 / image_h:.1f} px, "
+        f"sigma {p['sigma2d_px'] * 1080 / image_h:.1f} px per coordinate. "
         f"As a fraction of the person's image height: median "
         f"{100 * p['err2d_median_px'] / p['person_height_px']:.2f} %, sigma "
         f"{100 * p['sigma2d_px'] / p['person_height_px']:.2f} %.", "",

@@ -129,7 +129,7 @@ def _best_pair_inliers(P: np.ndarray, uv: np.ndarray, weights: np.ndarray, usabl
 
 
 def _dlt(P: np.ndarray, uv: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Weighted linear triangulation. uv: (M, N, 2), weights: (M, N) -> (M, 3) (NaN if < 2 views)."""
+    """Weighted linear triangulation: uv (M, N, 2), weights (M, N) -> (M, 3); NaN if < 2 views."""
     rows_x = uv[..., 0:1] * P[None, :, 2] - P[None, :, 0]   # (M, N, 4)
     rows_y = uv[..., 1:2] * P[None, :, 2] - P[None, :, 1]
     rows = np.concatenate([rows_x, rows_y], axis=1)          # (M, 2N, 4)
