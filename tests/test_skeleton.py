@@ -78,7 +78,22 @@ def test_trunk_joints_match_the_landmark_proxies_in_the_rest_pose():
     bones = BodyShape.from_height(1.6).bones()
     q = np.array([1.0, 0, 0, 0])
     joints, landmarks = fk(bones, np.zeros(3), q, np.zeros(NUM_DOF))
-    assert np.allclose(joints, joints_from_landmarks(landmarks), atol=1e-12)
+    proxies = joints_from_landmarks(landmarks)
+    foot = [i for i, n in enumerate(JOINT_NAMES) if n[2:] in ("heel", "toe")]
+    rest = [i for i in range(len(JOINT_NAMES)) if i not in foot]
+    assert np.allclose(joints[rest], proxies[rest], atol=1e-12)
+
+
+def test_heel_and_toe_joints_lie_on_the_sole_below_their_landmarks():
+    shape = BodyShape.from_height(1.7)
+    joints, landmarks = fk(shape.bones(), np.zeros(3), np.array([1.0, 0, 0, 0]), np.zeros(NUM_DOF))
+    proxies = joints_from_landmarks(landmarks)
+    sole_z = joints[JOINT_NAMES.index("l_ankle"), 2] - shape.ankle_height
+    for name in ("l_heel", "r_heel", "l_toe", "r_toe"):
+        i = JOINT_NAMES.index(name)
+        assert joints[i, 2] == pytest.approx(sole_z, abs=1e-12)
+        assert np.allclose(joints[i, :2], proxies[i, :2], atol=1e-12)  # straight below
+        assert proxies[i, 2] > joints[i, 2] + 0.01
 
 
 def test_bone_names_are_the_shape_fields():

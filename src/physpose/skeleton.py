@@ -203,11 +203,17 @@ LANDMARK_SITES: dict[str, tuple[str, _Linear]] = _landmark_table()
 LANDMARK_PARENTS: tuple[int, ...] = tuple(SEGMENT_INDEX[LANDMARK_SITES[n][0]]
                                           for n in LANDMARK_NAMES)
 
-# Project joints (JOINT_NAMES) as points: a segment origin, or a landmark for heels and toes.
+# Project joints (JOINT_NAMES) as points: a segment origin, or, for heels and toes, the rear and
+# front midpoints of the sole (the foot box's bottom face). Heel and toe joints are contact points
+# so that the foot-contact metrics (physpose.metrics) see the sole where it is; mocap readers
+# place them the same way. The MediaPipe heel/foot_index landmarks sit higher (FOOT_LANDMARK_Z).
+_SOLE: dict[str, _Linear] = {
+    "heel": {"heel_back": (-1.0, 0.0, 0.0), "ankle_height": (0.0, 0.0, -1.0)},
+    "toe": {"foot_length": (1.0, 0.0, 0.0), "heel_back": (-1.0, 0.0, 0.0),
+            "ankle_height": (0.0, 0.0, -1.0)},
+}
 JOINT_POINTS: dict[str, tuple[str, _Linear]] = {
-    name: (name, {}) if name in SEGMENT_INDEX else LANDMARK_SITES[
-        {"l_heel": "left_heel", "r_heel": "right_heel",
-         "l_toe": "left_foot_index", "r_toe": "right_foot_index"}[name]]
+    name: (name, {}) if name in SEGMENT_INDEX else (f"{name[0]}_ankle", _SOLE[name[2:]])
     for name in JOINT_NAMES
 }
 JOINT_PARENTS: tuple[int, ...] = tuple(SEGMENT_INDEX[JOINT_POINTS[n][0]] for n in JOINT_NAMES)
