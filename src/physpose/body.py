@@ -33,7 +33,7 @@ from physpose.scene import SceneConfig, add_scene
 from physpose.shape import HEAD_TOP_PER_EAR_WIDTH, BodyShape
 from physpose.skeleton import (AXES, AXIS_VECTORS, DOF_LIMITS, DOF_NAMES, DOF_TORQUE,
                                JOINT_POINTS, LANDMARK_SITES, NQ, NUM_DOF, NV, REFERENCE_HEIGHT,
-                               REFERENCE_MASS, SEGMENT_NAMES, SEGMENTS, landmark_offsets,
+                               REFERENCE_MASS, SEGMENT_NAMES, SEGMENTS, joint_offsets, landmark_offsets,
                                segment_offsets)
 
 # Segment mass fractions (% of body mass, one side for limbs), de Leva 1996 table 4.
@@ -252,11 +252,10 @@ def build_body(shape: BodyShape, scene: SceneConfig = SceneConfig(),
     for name, (parent, _) in LANDMARK_SITES.items():
         mj_bodies[parent].add_site(name=name, pos=lm_offsets[LANDMARK_NAMES.index(name)].tolist(),
                                    size=[0.012, 0, 0], rgba=[0.9, 0.1, 0.1, 1.0], group=3)
-    for name in JOINT_NAMES:
+    j_offsets = joint_offsets(shape.bones())
+    for i, name in enumerate(JOINT_NAMES):
         parent, _ = JOINT_POINTS[name]
-        pos = (np.zeros(3) if not JOINT_POINTS[name][1]
-               else lm_offsets[LANDMARK_NAMES.index(_landmark_of_joint(name))])
-        mj_bodies[parent].add_site(name=name, pos=pos.tolist(), size=[0.015, 0, 0],
+        mj_bodies[parent].add_site(name=name, pos=j_offsets[i].tolist(), size=[0.015, 0, 0],
                                    rgba=[0.1, 0.3, 0.9, 1.0], group=4)
     for a, b in EXCLUDED_PAIRS:
         spec.add_exclude(name=f"exclude_{a}_{b}", bodyname1=a, bodyname2=b)
@@ -288,11 +287,6 @@ def _compile(spec: mujoco.MjSpec) -> mujoco.MjModel:
         raise PhysposeError(f"the body model did not compile: {err}",
                             remedy="check the body shape (lengths and radii) for odd values") \
             from err
-
-
-def _landmark_of_joint(joint: str) -> str:
-    side = "left" if joint.startswith("l_") else "right"
-    return f"{side}_heel" if joint.endswith("heel") else f"{side}_foot_index"
 
 
 def _index(shape, scene, config, spec, model, masses, limits) -> Body:
