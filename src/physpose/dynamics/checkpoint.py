@@ -1,0 +1,54 @@
+"""Per-window checkpoints: a run folder keyed by the inputs and the config, one npz per window.
+
+An interrupted run finds the windows it already finished and continues after them; a change
+of any input (kinematic estimate, detections, camera, body model) or of the config gives a
+new key and so a new folder, never a stale result.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from physpose.cache import atomic_path, stage_key
+from physpose.paths import cache_dir
+
+CHECKPOINT_VERSION = 1  # bump when the optimisation's results change for the same inputs
+
+
+def run_key(config_identity: dict, inputs: dict) -> str:
+    """Key (64 hex chars) of a dynamics run."""
+    return stage_key("dynamics", version=CHECKPOINT_VERSION, config=config_identity,
+                     extra=inputs)
+
+
+def run_folder(key: str, root: str | Path | None = None) -> Path:
+    """Where a run's window files live (default: the stage cache, ``<cache>/dynamics``)."""
+    base = Path(root) if root is not None else cache_dir() / "dynamics"
+    return base / key[:24]
+
+
+def window_path(folder: Path, index: int) -> Path:
+    return folder / f"window_{index:03d}.npz"
+
+
+def save_window(folder: Path, index: int, arrays: dict[str, np.ndarray], record: dict) -> Path:
+    """Write one finished window atomically (arrays plus a JSON record)."""
+    path = window_path(folder, index)
+    with atomic_path(path) as tmp, tmp.open("wb") as fh:
+        np.savez(fh, record_json=np.array(json.dumps(record)),
+                 **{k: np.asarray(v) for k, v in arrays.items()})
+    return path
+
+
+def load_window(folder: Path, index: int) -> tuple[dict[str, np.ndarray], dict] | None:
+    """A finished window's (arrays, record), or None when it has not been written."""
+    path = window_path(folder, index)
+    if not path.is_file():
+        return None
+    with np.load(path, allow_pickle=False) as data:
+        arrays = {k: data[k] for k in data.files if k != "record_json"}
+        record = json.loads(str(data["record_json"]))
+    return arrays, record

@@ -1,0 +1,216 @@
+"""Starting point of the optimisation: a smoothed reference motion, its states and servo targets.
+
+The kinematic estimate is low-passed by a least-squares cubic B-spline fit (knot spacing
+``reference_knot_spacing``; root quaternions sign-aligned first), which also gives velocities
+and accelerations analytically on the 200 Hz simulation grid. Initial states take positions and
+velocities from it (velocities are the derivative of the fit: finite differences of the
+estimate, low-passed).
+
+Initial servo targets follow the recipe measured in DESIGN.md ("Measured pitfalls"): inverse
+dynamics (``mj_inverse``) of the smoothed motion with contacts disabled gives the generalised
+force the motion needs; the part on the free root (a force and torque no motor can make) is
+explained by ground forces at the sole points that are near the floor, solved as non-negative
+least squares on the edges of a linearised friction cone; what remains on the hinges is the
+motor torque, clipped to its limit, and the target that makes the servo produce it follows from the servo law in the model
+(``q + tau / kp`` for position servos whose damping is passive). A least-squares spline fit of these targets (clipped to the joint
+limits) gives the initial coefficients.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from scipy.optimize import nnls
+
+from physpose.dynamics.spline import KnotGrid, fit_coefficients
+from physpose.skeleton import DOF_LIMITS, NQ, NV
+
+_FRICTION_EDGES = 4       # sides of the friction pyramid
+_CONE_MARGIN = 0.8        # use this fraction of the friction coefficient (inside the cone)
+_FORCE_REGULARISER = 1e-6  # relative weight of |beta|^2 for a sole point on the floor
+_HEIGHT_SCALE = 0.01      # m: a point this high above the floor costs (1 + 1)^2 = 4x as much
+
+
+@dataclass(frozen=True, eq=False)
+class Reference:
+    """The smoothed kinematic motion on the simulation grid, step times n * dt (s).
+
+    qpos (N+1, 55), qvel (N+1, 54), qacc (N+1, 54): MuJoCo coordinates (root angular velocity
+    and acceleration in the pelvis frame).
+    """
+
+    dt: float
+    qpos: np.ndarray
+    qvel: np.ndarray
+    qacc: np.ndarray
+
+    @property
+    def num_steps(self) -> int:
+        return int(self.qpos.shape[0]) - 1
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+
+
+def _conj(q: np.ndarray) -> np.ndarray:
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def align_quaternion_signs(quat: np.ndarray) -> np.ndarray:
+    """Flip quaternions (T, 4) so consecutive ones have a non-negative dot product."""
+    q = np.array(quat, dtype=float)
+    for t in range(1, len(q)):
+        if np.dot(q[t], q[t - 1]) < 0:
+            q[t] = -q[t]
+    return q
+
+
+def smooth_reference(qpos: np.ndarray, fps: float, dt: float, num_steps: int,
+                     knot_spacing: float) -> Reference:
+    """Low-pass the estimate qpos (T, 55) at ``fps`` and sample it at steps 0..num_steps."""
+    t_frames = np.arange(len(qpos)) / fps
+    t_steps = np.arange(num_steps + 1) * dt
+    grid = KnotGrid(knot_spacing, max(t_frames[-1], t_steps[-1]))
+    values = np.array(qpos, dtype=float)
+    values[:, 3:7] = align_quaternion_signs(values[:, 3:7])
+    basis = grid.basis(t_frames)
+    # Coefficients no frame constrains (a clip shorter than a few knots) rest on the nearest
+    # frame's value rather than zero.
+    nearest = values[np.clip(np.round(grid.centres() * fps).astype(int), 0, len(values) - 1)]
+    coefs = fit_coefficients(basis, values, ridge=1e-3, prior=nearest)
+    pos, vel, acc = (grid.basis(t_steps, derivative=d) @ coefs for d in (0, 1, 2))
+    quat, dquat, ddquat = pos[:, 3:7], vel[:, 3:7], acc[:, 3:7]
+    norm = np.linalg.norm(quat, axis=-1, keepdims=True)
+    unit = quat / norm
+    # d(q/|q|)/dt for the angular velocity; omega_local = 2 (q* x qdot)_vec for a unit q.
+    dunit = dquat / norm - unit * np.sum(unit * dquat, axis=-1, keepdims=True) / norm
+    omega = 2.0 * _quat_mul(_conj(unit), dunit)[:, 1:]
+    alpha = 2.0 * _quat_mul(_conj(unit), ddquat / norm)[:, 1:]
+    qp = np.concatenate([pos[:, :3], unit, pos[:, 7:]], axis=1)
+    qv = np.concatenate([vel[:, :3], omega, vel[:, 7:]], axis=1)
+    qa = np.concatenate([acc[:, :3], alpha, acc[:, 7:]], axis=1)
+    assert qp.shape[1] == NQ and qv.shape[1] == NV
+    return Reference(dt=dt, qpos=qp, qvel=qv, qacc=qa)
+
+
+def sole_points(model: mujoco.MjModel, foot_geoms: dict[str, int]) -> list[tuple[int, np.ndarray]]:
+    """Points on the bottom face of each foot box: (body id, offset in the geom frame) x 6."""
+    points = []
+    for geom in foot_geoms.values():
+        hx, hy, hz = model.geom_size[geom]
+        for fx in (-1.0, 0.0, 1.0):
+            for fy in (-1.0, 1.0):
+                points.append((geom, np.array([fx * hx, fy * hy, -hz])))
+    return points
+
+
+def _pyramid(mu: float) -> np.ndarray:
+    """(E, 3) edges of the linearised friction cone, normal +z."""
+    ang = 2 * np.pi * np.arange(_FRICTION_EDGES) / _FRICTION_EDGES
+    m = _CONE_MARGIN * mu
+    return np.stack([m * np.cos(ang), m * np.sin(ang), np.ones_like(ang)], axis=-1)
+
+
+def ground_forces(model: mujoco.MjModel, data: mujoco.MjData, wrench: np.ndarray,
+                  points: list[tuple[int, np.ndarray]], mu: float, max_height: float
+                  ) -> np.ndarray:
+    """Generalised force (nv,) of ground forces at sole points best explaining the root wrench.
+
+    data holds the kinematics of the current state. wrench: (6,) the free joint's part of the
+    inverse-dynamics force. Points higher than max_height (m) above z = 0 do not push.
+    """
+    edges = _pyramid(mu)
+    columns, costs = [], []
+    jacp = np.zeros((3, model.nv))
+    for geom, offset in points:
+        world = data.geom_xpos[geom] + data.geom_xmat[geom].reshape(3, 3) @ offset
+        height = world[2]
+        if height > max_height:
+            continue
+        mujoco.mj_jac(model, data, jacp, None, world, model.geom_bodyid[geom])
+        gen = (jacp.T @ edges.T).T  # (E, nv): generalised force of a unit push along each edge
+        columns.append(gen)
+        costs.append(np.full(len(edges), (1.0 + max(height, 0.0) / _HEIGHT_SCALE) ** 2))
+    if not columns:
+        return np.zeros(model.nv)
+    gen = np.concatenate(columns, axis=0)  # (P*E, nv)
+    cost = np.concatenate(costs)
+    lhs = np.concatenate([gen[:, :6].T, np.diag(np.sqrt(_FORCE_REGULARISER * cost))])
+    rhs = np.concatenate([wrench, np.zeros(len(cost))])
+    beta, _ = nnls(lhs, rhs, maxiter=50 * lhs.shape[1])
+    return gen.T @ beta
+
+
+def inverse_dynamics_targets(model: mujoco.MjModel, ref: Reference, foot_geoms: dict[str, int],
+                             mu: float, contact_height: float) -> np.ndarray:
+    """Servo targets (N+1, 48) that make the servos produce the reference's motor torques.
+
+    Reads the servo law from the model: force = gain ctrl + bias0 + bias1 q + bias2 qdot,
+    clipped to the force range; damping outside that law is passive and already in
+    mj_inverse's balance.
+    """
+    m = copy.deepcopy(model)
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    data = mujoco.MjData(m)
+    points = sole_points(m, foot_geoms)
+    torques = np.empty((len(ref.qpos), m.nu))
+    for n in range(len(ref.qpos)):
+        data.qpos[:], data.qvel[:], data.qacc[:] = ref.qpos[n], ref.qvel[n], ref.qacc[n]
+        mujoco.mj_inverse(m, data)
+        need = data.qfrc_inverse.copy()
+        need -= ground_forces(m, data, need[:6], points, mu, contact_height)
+        torques[n] = need[6:]
+    lo, hi = m.actuator_forcerange[:, 0], m.actuator_forcerange[:, 1]
+    torques = np.clip(torques, lo, hi)
+    gain, bias = m.actuator_gainprm[:, 0], m.actuator_biasprm[:, :3]
+    q, qd = ref.qpos[:, 7:], ref.qvel[:, 6:]
+    return (torques - bias[:, 0] - bias[:, 1] * q - bias[:, 2] * qd) / gain
+
+
+def initial_coefficients(grid: KnotGrid, step_times: np.ndarray, targets: np.ndarray
+                         ) -> np.ndarray:
+    """Spline coefficients (K, 48) fitted to targets (S, 48) at step_times, within joint limits."""
+    clipped = np.clip(targets, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])
+    nearest = clipped[np.clip(np.round(grid.centres() / (step_times[1] - step_times[0])
+                                       ).astype(int), 0, len(clipped) - 1)]
+    coefs = fit_coefficients(grid.basis(step_times), clipped, ridge=1e-3, prior=nearest)
+    return np.clip(coefs, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])
+
+
+def lowest_point(model: mujoco.MjModel, data: mujoco.MjData) -> float:
+    """Lowest z (m) of any body geom after mj_kinematics (capsules, spheres, boxes)."""
+    lowest = np.inf
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] == 0:
+            continue
+        size, pos = model.geom_size[g], data.geom_xpos[g]
+        rot = data.geom_xmat[g].reshape(3, 3)
+        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
+            z = pos[2] - np.abs(rot[2]) @ size
+        elif model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
+            z = pos[2] - abs(rot[2, 2]) * size[1] - size[0]
+        else:
+            z = pos[2] - size[0]
+        lowest = min(lowest, float(z))
+    return lowest
+
+
+def ground_state(model: mujoco.MjModel, qpos: np.ndarray, snap: float) -> np.ndarray:
+    """qpos (55,) shifted up out of the floor, or down onto it when it hovers less than snap (m)."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    low = lowest_point(model, data)
+    out = np.array(qpos, dtype=float)
+    if low < snap:
+        out[2] -= low
+    return out

@@ -1,0 +1,233 @@
+"""The trajectory objective of one window: named terms, weights under the same names.
+
+Each term is a function ``_cost_<name>(samples, ref, frames, history) -> (B,)`` of a batch of
+simulated windows sampled at the frame times; the total is ``sum(w[name] * cost[name])``.
+Frame 0 of a window is its starting state (the same for every sample); terms average over the
+window's other frames, so their values do not grow with the window's length (the paper sums
+over frames; with one window length that is the same up to a constant factor). Units:
+
+- ``com`` (paper eq. 1): |c - c_k|^2 + |c' - c'_k|^2, centre of mass (m) and its velocity (m/s,
+  finite differences over frames) against the kinematic estimate's.
+- ``pose`` (eq. 2): sum over the 16 joints and the root of arccos |<q, q_k>| (rad, half the
+  rotation angle between simulated and kinematic joint rotations).
+- ``reprojection`` (eq. 3): sum over the 33 landmarks of confidence x image distance (px)
+  between the projected landmark site and the detection, converted to metres at the person's
+  depth (x depth / focal length, per frame). The paper sums raw pixels, whose size depends on
+  the camera and the person's distance; in metres it has the magnitude of the 3d terms, as the
+  paper's tuning intended ("roughly equal magnitudes").
+- ``prior`` (stands in for eq. 4, the normalising-flow pose prior, which is not available):
+  |z| with z = (angle - neutral) / spread per hinge, a diagonal Gaussian pose prior whose mean
+  is the upright neutral pose and whose standard deviation is a quarter of each hinge's
+  anatomical range (so the range is the prior's +-2 sigma band; narrow secondary axes such as
+  knee ab/adduction are held tightly). Like the flow prior's |z| it is small for ordinary poses
+  and grows for contorted ones. Left and right sides get the same (mirrored) prior.
+- ``tv`` (eq. 5): (1/J) sum_j |a_t - a_{t-1}|_1 over the 21 project joints, accelerations a
+  (m/s^2) by second differences over frames, x TV_SCALE.
+- ``lim``: sum over hinges of exp(excess / LIMIT_SOFTNESS) - 1, where excess (rad) is how far
+  an angle lies outside its joint range (0 inside).
+
+A sample whose simulation broke, whose root strays more than ``max_root_distance`` from the
+kinematic root, or that sinks a landmark more than ``max_penetration`` below the floor scores
++inf (`invalid_from` tells from which frame on, for ranking failures among themselves).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import mujoco
+import numpy as np
+
+from physpose.dynamics.rollout import FrameSamples
+from physpose.metrics import transform_points
+from physpose.skeleton import DOF_LIMITS, NUM_JOINTS3
+
+TERMS: tuple[str, ...] = ("com", "pose", "reprojection", "prior", "tv", "lim")
+TV_SCALE = 0.1             # the TV term's unit: 10 m/s^2 of acceleration change per frame -> 1
+LIMIT_SOFTNESS = 0.05      # rad: the limit penalty grows e-fold per this much excess
+_PRIOR_MEAN = np.clip(0.0, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])   # (48,) rad
+_PRIOR_STD = (DOF_LIMITS[:, 1] - DOF_LIMITS[:, 0]) / 4.0         # (48,) rad
+_MIN_DEPTH = 0.1           # m: landmarks closer to the camera than this are projected at it
+
+
+@dataclass(frozen=True)
+class ObjectiveWeights:
+    """Weight of each objective term (the paper's defaults); 0 removes the term (ablations)."""
+
+    com: float = 15.0
+    pose: float = 0.5
+    reprojection: float = 4.0
+    prior: float = 1.0
+    tv: float = 1.0
+    lim: float = 1.0
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"objective weight {f.name}={value} must be finite and >= 0")
+
+    def as_dict(self) -> dict[str, float]:
+        return {name: float(getattr(self, name)) for name in TERMS}
+
+
+@dataclass(frozen=True, eq=False)
+class ObjectiveReference:
+    """What the simulated motion is scored against, per frame of the clip (T frames).
+
+    qpos (T, 55) kinematic estimate; quats (T, 17, 4) its root and joint rotations (w,x,y,z);
+    com (T, 3) m; keypoints2d (T, 33, 3) px + confidence; camera_K (3, 3);
+    T_world2cam (4, 4); metres_per_px (T,) at the kinematic root's depth; fps Hz.
+    """
+
+    qpos: np.ndarray
+    quats: np.ndarray
+    com: np.ndarray
+    keypoints2d: np.ndarray
+    camera_K: np.ndarray
+    T_world2cam: np.ndarray
+    metres_per_px: np.ndarray
+    fps: float
+
+
+def _axis_quat(angle: np.ndarray, axis: int) -> np.ndarray:
+    q = np.zeros(angle.shape + (4,))
+    q[..., 0] = np.cos(0.5 * angle)
+    q[..., 1 + axis] = np.sin(0.5 * angle)
+    return q
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of quaternions (..., 4) w,x,y,z."""
+    aw, ax, ay, az = np.moveaxis(a, -1, 0)
+    bw, bx, by, bz = np.moveaxis(b, -1, 0)
+    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
+                     aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
+
+
+def joint_quaternions(qpos: np.ndarray) -> np.ndarray:
+    """Root and joint rotations (..., 17, 4) from qpos (..., 55); joints R = Ry(a) Rx(b) Rz(c)."""
+    ang = qpos[..., 7:].reshape(qpos.shape[:-1] + (NUM_JOINTS3, 3))
+    joints = quat_mul(quat_mul(_axis_quat(ang[..., 0], 1), _axis_quat(ang[..., 1], 0)),
+                      _axis_quat(ang[..., 2], 2))
+    root = qpos[..., 3:7] / np.linalg.norm(qpos[..., 3:7], axis=-1, keepdims=True)
+    return np.concatenate([root[..., None, :], joints], axis=-2)
+
+
+def centre_of_mass(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
+    """Whole-body centre of mass (T, 3) m for qpos (T, 55)."""
+    data = mujoco.MjData(model)
+    out = np.empty((len(qpos), 3))
+    for t, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        out[t] = data.subtree_com[1]
+    return out
+
+
+def make_reference(model: mujoco.MjModel, qpos: np.ndarray, keypoints2d: np.ndarray,
+                   camera_K: np.ndarray, T_world2cam: np.ndarray, fps: float
+                   ) -> ObjectiveReference:
+    """The per-frame targets from a kinematic estimate qpos (T, 55) and its detections."""
+    depth = transform_points(T_world2cam, qpos[:, :3])[:, 2]
+    focal = 0.5 * (camera_K[0, 0] + camera_K[1, 1])
+    return ObjectiveReference(
+        qpos=np.asarray(qpos, dtype=float), quats=joint_quaternions(qpos),
+        com=centre_of_mass(model, qpos), keypoints2d=np.asarray(keypoints2d, dtype=float),
+        camera_K=np.asarray(camera_K, dtype=float), T_world2cam=np.asarray(T_world2cam, dtype=float),
+        metres_per_px=np.maximum(depth, _MIN_DEPTH) / focal, fps=float(fps))
+
+
+def _cost_com(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history) -> np.ndarray:
+    pos = np.sum((s.com[:, 1:] - ref.com[frames[1:]]) ** 2, axis=-1).mean(axis=1)
+    vel = np.diff(s.com, axis=1) * ref.fps
+    vel_k = np.diff(ref.com[frames], axis=0) * ref.fps
+    return pos + np.sum((vel - vel_k) ** 2, axis=-1).mean(axis=1)
+
+
+def _cost_pose(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history
+               ) -> np.ndarray:
+    quats = joint_quaternions(s.qpos[:, 1:])
+    dot = np.abs(np.sum(quats * ref.quats[frames[1:]], axis=-1))
+    return np.arccos(np.minimum(dot, 1.0)).sum(axis=-1).mean(axis=1)
+
+
+def project(points: np.ndarray, K: np.ndarray, T_world2cam: np.ndarray) -> np.ndarray:
+    """Pinhole projection (..., 3) world -> (..., 2) px, depth clamped at _MIN_DEPTH."""
+    cam = transform_points(T_world2cam, points)
+    z = np.maximum(cam[..., 2:3], _MIN_DEPTH)
+    return (cam[..., :2] / z) @ K[:2, :2].T + K[:2, 2]
+
+
+def _cost_reprojection(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history
+                       ) -> np.ndarray:
+    uv = project(s.landmarks[:, 1:], ref.camera_K, ref.T_world2cam)
+    kp = ref.keypoints2d[frames[1:]]
+    dist = np.linalg.norm(uv - kp[..., :2], axis=-1)  # (B, F-1, 33) px
+    per_frame = np.sum(kp[..., 2] * dist, axis=-1) * ref.metres_per_px[frames[1:]]
+    return per_frame.mean(axis=1)
+
+
+def _cost_prior(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history
+                ) -> np.ndarray:
+    z = (s.qpos[:, 1:, 7:] - _PRIOR_MEAN) / _PRIOR_STD
+    return np.linalg.norm(z, axis=-1).mean(axis=1)
+
+
+def _cost_tv(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history
+             ) -> np.ndarray:
+    x = s.joints
+    if history is not None and len(history):
+        x = np.concatenate([np.broadcast_to(history, (len(x),) + history.shape), x], axis=1)
+    if x.shape[1] < 4:
+        return np.zeros(len(x))
+    acc = (x[:, 2:] - 2 * x[:, 1:-1] + x[:, :-2]) * ref.fps ** 2
+    tv = np.abs(np.diff(acc, axis=1)).sum(axis=-1).mean(axis=-1)  # (B, F'): (1/J) sum_j L1
+    return TV_SCALE * tv.mean(axis=1)
+
+
+def _cost_lim(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history
+              ) -> np.ndarray:
+    angles = s.qpos[:, 1:, 7:]
+    excess = np.maximum(angles - DOF_LIMITS[:, 1], 0.0) + np.maximum(DOF_LIMITS[:, 0] - angles, 0.0)
+    return np.expm1(excess / LIMIT_SOFTNESS).sum(axis=-1).mean(axis=1)
+
+
+_COSTS = {name: globals()[f"_cost_{name}"] for name in TERMS}
+
+
+def evaluate_terms(samples: FrameSamples, ref: ObjectiveReference, frames: np.ndarray,
+                   history: np.ndarray | None = None,
+                   weights: ObjectiveWeights | None = None) -> dict[str, np.ndarray]:
+    """Every term (B,) of a batch sampled at clip frames (F,) (frames[0] = the start state).
+
+    history: (H, 21, 3) simulated joints of the H frames before frames[0] (for the TV term).
+    Terms with weight 0 in ``weights`` are skipped (reported as 0).
+    """
+    frames = np.asarray(frames, dtype=int)
+    out = {}
+    for name, fn in _COSTS.items():
+        if weights is not None and getattr(weights, name) == 0:
+            out[name] = np.zeros(samples.qpos.shape[0])
+        else:
+            out[name] = fn(samples, ref, frames, history)
+    return out
+
+
+def invalid_from(samples: FrameSamples, ref: ObjectiveReference, frames: np.ndarray,
+                 max_root_distance: float, max_penetration: float) -> np.ndarray:
+    """(B,) the first frame index (within the window) at which a sample left the valid
+    state space, or F when it never did."""
+    far = np.linalg.norm(samples.qpos[..., :3] - ref.qpos[frames, :3], axis=-1) > max_root_distance
+    sunk = samples.landmarks[..., 2].min(axis=-1) < -max_penetration
+    bad = samples.broken | far | sunk | ~np.isfinite(samples.qpos).all(axis=-1)
+    first = np.where(bad.any(axis=1), bad.argmax(axis=1), bad.shape[1])
+    return first
+
+
+def total(terms: dict[str, np.ndarray], weights: ObjectiveWeights) -> np.ndarray:
+    """Weighted sum (B,) of the terms."""
+    return sum(getattr(weights, name) * terms[name] for name in TERMS)

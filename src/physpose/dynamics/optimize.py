@@ -1,0 +1,455 @@
+"""Trajectory optimisation (paper sec. 3.2): CMA-ES over servo-target spline coefficients.
+
+``optimize_dynamics(body, kinematic_fit, observations, config) -> PhysicsResult``
+
+Sequential windows (the default, as in the paper): each window starts from the simulated state
+of the previous one at its first frame and searches the spline coefficients whose support
+begins inside it; coefficients already acting before its start stay as the previous window left
+them, so the whole clip is one simulation driven by one spline. Independent windows (the
+paper's mode for long clips): every window starts from the kinematic state at its first frame,
+searches all its coefficients, and the windows are searched side by side (their samples share
+one batched rollout) and cross-faded where they overlap.
+
+Every finished window is written to a run folder keyed by the inputs and the config, so an
+interrupted run resumes at the first unfinished window. Same inputs, config and seed give the
+same result.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import cma
+import mujoco
+import numpy as np
+from tqdm import tqdm
+
+from physpose.body import Body
+from physpose.dynamics import checkpoint
+from physpose.dynamics.init import (Reference, ground_state, initial_coefficients,
+                                    inverse_dynamics_targets, smooth_reference)
+from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, make_reference)
+from physpose.dynamics.result import PhysicsResult
+from physpose.dynamics.rollout import SimModel, Simulator, Trajectories, make_state, sim_model
+from physpose.dynamics.spline import KnotGrid
+from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
+                                       ranked_fitness, score, step_position)
+from physpose.errors import PhysposeError
+from physpose.kinematics.result import KinematicFit
+from physpose.observations import Observations
+from physpose.skeleton import NQ
+
+MIN_FRAMES = 3
+
+
+@dataclass(frozen=True)
+class DynamicsConfig:
+    """Settings of the trajectory optimisation.
+
+    window, overlap: s (paper: 1 s windows). independent: optimise windows from the kinematic
+    state and join them (parallel_windows searched side by side). knot_spacing: s between
+    servo-target spline knots. reference_knot_spacing: s, low-pass of the kinematic estimate
+    for the initial state and targets. popsize, iterations: CMA-ES samples per iteration and
+    iterations per window; sigma0: rad, initial step size; diagonal: diagonal covariance
+    (sep-CMA) instead of full. max_root_distance: m, a sample whose root strays further from
+    the kinematic root is invalid; max_penetration: m below the floor. contact_height: m, sole
+    points this close to the floor may push in the initial inverse dynamics; ground_snap: m,
+    an initial state hovering less than this is put down on the floor. seed: CMA-ES seed.
+    nthread: rollout threads (does not change results).
+    """
+
+    window: float = 1.0
+    overlap: float = 0.4
+    independent: bool = False
+    parallel_windows: int = 4
+    knot_spacing: float = 0.1
+    reference_knot_spacing: float = 0.1
+    popsize: int = 24
+    iterations: int = 20
+    sigma0: float = 0.05
+    diagonal: bool = True
+    weights: ObjectiveWeights = field(default_factory=ObjectiveWeights)
+    max_root_distance: float = 0.4
+    max_penetration: float = 0.1
+    contact_height: float = 0.03
+    ground_snap: float = 0.03
+    seed: int = 0
+    nthread: int = 2
+
+    def __post_init__(self) -> None:
+        positive = ("window", "knot_spacing", "reference_knot_spacing", "sigma0",
+                    "max_root_distance", "max_penetration")
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise PhysposeError(f"dynamics config {name}={getattr(self, name)} must be > 0",
+                                    remedy="use a preset (fast or paper) or positive values")
+        if not 0 <= self.overlap < self.window:
+            raise PhysposeError(f"dynamics overlap {self.overlap} s must be in [0, window)",
+                                remedy="choose an overlap shorter than the window")
+        for name in ("popsize", "parallel_windows", "nthread"):
+            if getattr(self, name) < 1:
+                raise PhysposeError(f"dynamics config {name} must be >= 1",
+                                    remedy="use a preset (fast or paper)")
+        if self.iterations < 0:
+            raise PhysposeError("dynamics iterations must be >= 0", remedy="use e.g. 20")
+
+    def identity(self) -> dict:
+        """The fields that change results (everything but the thread count)."""
+        out = dataclasses.asdict(self)
+        out.pop("nthread")
+        return out
+
+
+PRESETS: dict[str, DynamicsConfig] = {
+    "fast": DynamicsConfig(),
+    # The paper's budget: 2000 iterations x 100 samples per 1 s window, full covariance.
+    "paper": DynamicsConfig(popsize=100, iterations=2000, diagonal=False),
+}
+# Table 2 (bottom half): objective terms removed.
+ABLATIONS: dict[str, tuple[str, ...]] = {
+    "no2d": ("reprojection",), "no3d": ("pose",), "nocom": ("com",),
+    "nocompose": ("com", "pose"), "noprior": ("prior",),
+}
+
+
+def ablated(config: DynamicsConfig, name: str) -> DynamicsConfig:
+    """The config with the terms of ablation ``name`` (ABLATIONS) switched off."""
+    if name not in ABLATIONS:
+        raise PhysposeError(f"unknown ablation {name!r}", remedy=f"use one of {list(ABLATIONS)}")
+    weights = dataclasses.replace(config.weights, **{t: 0.0 for t in ABLATIONS[name]})
+    return dataclasses.replace(config, weights=weights)
+
+
+@dataclass(frozen=True, eq=False)
+class _Setup:
+    sim: SimModel
+    windows: list[Window]
+    grid: KnotGrid
+    coefs0: np.ndarray        # (K, 48) initial coefficients
+    reference: Reference      # smoothed estimate on the step grid
+    objective: ObjectiveReference
+    step_times: np.ndarray    # (N,) s, time of each control step
+
+
+def _check_inputs(kin: KinematicFit, obs: Observations) -> None:
+    t = kin.num_frames
+    if kin.qpos.shape != (t, NQ):
+        raise PhysposeError(f"kinematic qpos has shape {kin.qpos.shape}, expected ({t}, {NQ})",
+                            remedy="pass the KinematicFit of these observations")
+    if obs.num_frames != t:
+        raise PhysposeError(f"{obs.num_frames} observed frames but {t} kinematic frames",
+                            path=obs.source, remedy="fit the kinematics on these observations")
+    if abs(obs.fps - kin.fps) > 1e-6 * kin.fps:
+        raise PhysposeError(f"observations at {obs.fps} fps, kinematics at {kin.fps} fps",
+                            path=obs.source, remedy="fit the kinematics on these observations")
+    if t < MIN_FRAMES:
+        raise PhysposeError(f"{t} frames are too few for dynamics (need {MIN_FRAMES})",
+                            path=obs.source, remedy="use a longer clip")
+    bad = np.flatnonzero(~np.isfinite(kin.qpos).all(axis=1))
+    if len(bad):
+        raise PhysposeError("the kinematic estimate is not finite", path=obs.source,
+                            frame=int(bad[0]), remedy="re-run the kinematic fit")
+
+
+def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsConfig) -> _Setup:
+    fps, dt = kin.fps, sim.dt
+    windows = plan_windows(kin.num_frames, fps, dt, cfg.window, cfg.overlap,
+                           anchor_last=cfg.independent)
+    num_steps = int(np.ceil(step_position(kin.num_frames - 1, fps, dt) - 1e-9))
+    reference = smooth_reference(kin.qpos, fps, dt, num_steps, cfg.reference_knot_spacing)
+    targets = inverse_dynamics_targets(sim.model, reference, sim.body.foot_geom_ids,
+                                       sim.body.scene.ground_friction, cfg.contact_height)
+    step_times = np.arange(num_steps) * dt
+    grid = KnotGrid(cfg.knot_spacing, num_steps * dt)
+    coefs0 = initial_coefficients(grid, step_times, targets[:num_steps])
+    objective = make_reference(sim.model, kin.qpos, obs.keypoints2d, kin.camera_K,
+                               kin.T_world2cam, fps)
+    return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
+                  objective=objective, step_times=step_times)
+
+
+def _kinematic_state(setup: _Setup, step: int, snap: float) -> np.ndarray:
+    ref = setup.reference
+    qpos = ground_state(setup.sim.model, ref.qpos[step], snap)
+    return make_state(setup.sim, qpos, ref.qvel[step], time=step * setup.sim.dt)
+
+
+def _problem(setup: _Setup, win: Window, coefs: np.ndarray, state0: np.ndarray,
+             first_free: int, history: np.ndarray | None) -> WindowProblem:
+    active = setup.grid.active(win.start_step * setup.sim.dt, win.end_step * setup.sim.dt)
+    free = slice(max(active.start, first_free), active.stop)
+    basis = setup.grid.basis(setup.step_times[win.start_step:win.end_step])
+    mask = np.zeros(basis.shape[1], dtype=bool)
+    mask[free] = True
+    positions = step_position(win.frames, setup.objective.fps, setup.sim.dt) - win.start_step
+    return WindowProblem(window=win, state0=state0, free=free, basis=basis[:, mask],
+                         fixed_ctrl=basis[:, ~mask] @ coefs[~mask], x0=coefs[free].copy(),
+                         positions=positions, history=history)
+
+
+def _cma(x0: np.ndarray, cfg: DynamicsConfig, seed: int) -> cma.CMAEvolutionStrategy:
+    opts = {"seed": seed, "popsize": cfg.popsize, "CMA_diagonal": bool(cfg.diagonal),
+            "verbose": -9, "verb_log": 0, "verb_disp": 0, "maxiter": max(cfg.iterations, 1),
+            "tolfun": 0.0, "tolx": 0.0, "tolfunhist": 0.0, "tolflatfitness": 10 ** 9,
+            "tolstagnation": 10 ** 9}
+    return cma.CMAEvolutionStrategy(x0.ravel(), cfg.sigma0, opts)
+
+
+def _window_seed(seed: int, index: int) -> int:
+    """CMA-ES seed of a window (pycma treats 0 as 'from the clock', so never 0)."""
+    return (seed * 1_000_003 + index) % (2 ** 31 - 1) + 1
+
+
+@dataclass
+class _Best:
+    x: np.ndarray
+    loss: float
+    terms: dict
+    states: np.ndarray
+    sensors: np.ndarray
+
+
+def _slice(traj: Trajectories, rows: slice, steps: int) -> Trajectories:
+    return Trajectories(states=traj.states[rows, :steps + 1], sensors=traj.sensors[rows, :steps + 1],
+                        broken=traj.broken[rows, :steps + 1])
+
+
+class _Search:
+    """CMA-ES on a group of window problems in lockstep, sharing batched rollouts."""
+
+    def __init__(self, problems: list[WindowProblem], simulator: Simulator, setup: _Setup,
+                 cfg: DynamicsConfig, timing: dict):
+        self.problems, self.simulator, self.setup, self.cfg = problems, simulator, setup, cfg
+        self.timing = timing
+        self.evaluations = [0] * len(problems)
+
+    def _evaluate(self, xs: list[np.ndarray]) -> list[tuple]:
+        t0 = time.perf_counter()
+        ctrls = [p.ctrl(x) for p, x in zip(self.problems, xs)]
+        longest = max(c.shape[1] for c in ctrls)
+        ctrl = np.concatenate([np.concatenate([c, np.repeat(c[:, -1:], longest - c.shape[1], 1)],
+                                              axis=1) for c in ctrls])
+        state0 = np.concatenate([np.repeat(p.state0[None], len(x), 0)
+                                 for p, x in zip(self.problems, xs)])
+        traj = self.simulator.run(state0, ctrl)
+        t1 = time.perf_counter()
+        out, row = [], 0
+        for i, (p, x) in enumerate(zip(self.problems, xs)):
+            part = _slice(traj, slice(row, row + len(x)), p.window.num_steps)
+            row += len(x)
+            scores, _ = score(p, part, self.setup.objective, self.cfg.weights,
+                              self.cfg.max_root_distance, self.cfg.max_penetration)
+            self.evaluations[i] += len(x)
+            out.append((scores, part))
+        self.timing["rollout"] = self.timing.get("rollout", 0.0) + t1 - t0
+        self.timing["objective"] = self.timing.get("objective", 0.0) + time.perf_counter() - t1
+        return out
+
+    @staticmethod
+    def _update(best: _Best | None, x: np.ndarray, scores, part: Trajectories) -> _Best | None:
+        k = int(np.argmin(scores.total))
+        if not np.isfinite(scores.total[k]) or (best is not None and scores.total[k] >= best.loss):
+            return best
+        return _Best(x=np.array(x[k]), loss=float(scores.total[k]),
+                     terms={n: float(v[k]) for n, v in scores.terms.items()},
+                     states=part.states[k].copy(), sensors=part.sensors[k].copy())
+
+    def run(self, seeds: list[int], label: str, progress: bool) -> tuple[list[_Best], list[dict]]:
+        """Search every problem; returns the best sample of each and its initial record."""
+        x0 = [p.x0.reshape(1, -1) for p in self.problems]
+        first = self._evaluate(x0)
+        best = [self._update(None, x, s, part) for x, (s, part) in zip(x0, first)]
+        initial = [{"loss": float(s.total[0]), "terms": {n: float(v[0]) for n, v in s.terms.items()},
+                    "valid": bool(np.isfinite(s.total[0]))} for s, _ in first]
+        strategies = [_cma(p.x0, self.cfg, seed) for p, seed in zip(self.problems, seeds)]
+        bar = tqdm(total=self.cfg.iterations, desc=label, disable=not progress, file=sys.stderr,
+                   leave=False, dynamic_ncols=True)
+        for _ in range(self.cfg.iterations):
+            xs = [np.array(es.ask()) for es in strategies]
+            for i, (es, x, (scores, part)) in enumerate(zip(strategies, xs, self._evaluate(xs))):
+                es.tell(list(x), ranked_fitness(scores, len(self.problems[i].positions)).tolist())
+                best[i] = self._update(best[i], x, scores, part)
+            bar.update(1)
+            bar.set_postfix(loss=" ".join(f"{b.loss:.3g}" if b else "inf" for b in best))
+        bar.close()
+        if self.cfg.iterations:  # the final mean was never sampled itself
+            means = [np.array(es.mean).reshape(1, -1) for es in strategies]
+            for i, (x, (scores, part)) in enumerate(zip(means, self._evaluate(means))):
+                best[i] = self._update(best[i], x, scores, part)
+        for i, b in enumerate(best):
+            if b is None:
+                raise PhysposeError(
+                    f"every simulated sample of window {self.problems[i].window.index} failed "
+                    f"(fell, left the kinematic estimate by more than "
+                    f"{self.cfg.max_root_distance} m, or broke the simulation)",
+                    frame=self.problems[i].window.first,
+                    remedy="check the kinematic estimate of these frames (ground plane, "
+                           "scale), or raise max_root_distance")
+        return best, initial
+
+
+def _frame_outputs(setup: _Setup, b: _Best, win: Window, frames: np.ndarray) -> dict:
+    traj = Trajectories(states=b.states[None], sensors=b.sensors[None],
+                        broken=np.zeros((1, len(b.states)), dtype=bool))
+    pos = step_position(frames, setup.objective.fps, setup.sim.dt) - win.start_step
+    s = traj.at(pos)
+    return {"qpos": s.qpos[0], "joints": s.joints[0], "landmarks": s.landmarks[0], "com": s.com[0]}
+
+
+def _record(win: Window, best: _Best, initial: dict, evaluations: int, seconds: float,
+            weights: ObjectiveWeights) -> dict:
+    return {"index": win.index, "frames": [win.first, win.last],
+            "steps": [win.start_step, win.end_step], "evaluations": evaluations,
+            "loss_initial": initial["loss"], "terms_initial": initial["terms"],
+            "initial_valid": initial["valid"], "loss_final": best.loss,
+            "terms_final": best.terms, "weights": weights.as_dict(), "seconds": seconds}
+
+
+_OUTPUT_KEYS = ("qpos", "joints", "landmarks", "com")
+
+
+def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, folder: Path | None,
+                    progress: bool, timing: dict) -> tuple[dict, np.ndarray, list[dict]]:
+    wins = setup.windows
+    coefs = setup.coefs0.copy()
+    state = _kinematic_state(setup, 0, cfg.ground_snap)
+    parts: dict[str, list[np.ndarray]] = {k: [] for k in _OUTPUT_KEYS}
+    ctrl_parts, records = [], []
+    for w, win in enumerate(wins):
+        commit_end = wins[w + 1].first if w + 1 < len(wins) else win.last + 1
+        step_end = wins[w + 1].start_step if w + 1 < len(wins) else win.end_step
+        saved = checkpoint.load_window(folder, w) if folder is not None else None
+        if saved is None:
+            start = time.perf_counter()
+            joints_so_far = np.concatenate(parts["joints"]) if parts["joints"] else np.zeros((0,))
+            history = joints_so_far[max(0, win.first - 2):win.first] if w > 0 else None
+            first_free = setup.grid.started_before(win.start_step * setup.sim.dt) if w else 0
+            problem = _problem(setup, win, coefs, state, first_free, history)
+            search = _Search([problem], simulator, setup, cfg, timing)
+            (best,), (initial,) = search.run([_window_seed(cfg.seed, w)],
+                                             f"dynamics window {w + 1}/{len(wins)}", progress)
+            coefs = coefs.copy()
+            coefs[problem.free] = best.x.reshape(problem.x0.shape)
+            ctrl = problem.ctrl(best.x[None])[0][:step_end - win.start_step]
+            out = _frame_outputs(setup, best, win, np.arange(win.first, commit_end))
+            next_state = best.states[step_end - win.start_step]
+            record = _record(win, best, initial, search.evaluations[0],
+                             time.perf_counter() - start, cfg.weights)
+            arrays = {"coefs": coefs, "next_state": next_state, "ctrl": ctrl, **out}
+            if folder is not None:
+                checkpoint.save_window(folder, w, arrays, record)
+        else:
+            arrays, record = saved
+        coefs, state = arrays["coefs"], arrays["next_state"]
+        for k in _OUTPUT_KEYS:
+            parts[k].append(arrays[k])
+        ctrl_parts.append(arrays["ctrl"])
+        records.append(record)
+    return ({k: np.concatenate(v) for k, v in parts.items()}, np.concatenate(ctrl_parts),
+            records)
+
+
+def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
+                     folder: Path | None, progress: bool, timing: dict
+                     ) -> tuple[dict, np.ndarray, list[dict]]:
+    wins = setup.windows
+    results: list[tuple[dict, dict] | None] = [
+        checkpoint.load_window(folder, w) if folder is not None else None for w in range(len(wins))]
+    todo = [w for w in range(len(wins)) if results[w] is None]
+    for g in range(0, len(todo), cfg.parallel_windows):
+        group = todo[g:g + cfg.parallel_windows]
+        start = time.perf_counter()
+        problems = [_problem(setup, wins[w], setup.coefs0,
+                             _kinematic_state(setup, wins[w].start_step, cfg.ground_snap), 0, None)
+                    for w in group]
+        search = _Search(problems, simulator, setup, cfg, timing)
+        label = f"dynamics windows {group[0] + 1}-{group[-1] + 1}/{len(wins)}"
+        bests, initials = search.run([_window_seed(cfg.seed, w) for w in group], label, progress)
+        seconds = (time.perf_counter() - start) / len(group)
+        for i, w in enumerate(group):
+            win, best = wins[w], bests[i]
+            out = _frame_outputs(setup, best, win, win.frames)
+            ctrl = problems[i].ctrl(best.x[None])[0]
+            record = _record(win, best, initials[i], search.evaluations[i], seconds, cfg.weights)
+            arrays = {"ctrl": ctrl, **out}
+            if folder is not None:
+                checkpoint.save_window(folder, w, arrays, record)
+            results[w] = (arrays, record)
+    weights = blend_weights(wins, setup.objective.qpos.shape[0])
+    joined = {}
+    for k in _OUTPUT_KEYS:
+        acc = None
+        for w, win in enumerate(wins):
+            part = results[w][0][k]
+            wk = weights[w, win.first:win.last + 1].reshape((-1,) + (1,) * (part.ndim - 1))
+            if acc is None:
+                acc = np.zeros((weights.shape[1],) + part.shape[1:])
+            if k == "qpos":  # quaternions: align signs before the cross-fade, renormalise after
+                part = part.copy()
+                sign = np.sign(np.sum(part[:, 3:7] * acc[win.first:win.last + 1, 3:7], axis=-1))
+                part[:, 3:7] *= np.where(sign < 0, -1.0, 1.0)[:, None]
+            acc[win.first:win.last + 1] += wk * part
+        joined[k] = acc
+    quat = joined["qpos"][:, 3:7]
+    joined["qpos"][:, 3:7] = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+    ctrl = np.concatenate([
+        results[w][0]["ctrl"][:(wins[w + 1].start_step if w + 1 < len(wins) else wins[w].end_step)
+                              - wins[w].start_step] for w in range(len(wins))])
+    return joined, ctrl, [results[w][1] for w in range(len(wins))]
+
+
+def foot_heights(model: mujoco.MjModel, qpos: np.ndarray, foot_geoms: dict[str, int]
+                 ) -> np.ndarray:
+    """(T, 2) lowest z (m) of the left and right foot boxes for qpos (T, 55)."""
+    data = mujoco.MjData(model)
+    out = np.empty((len(qpos), 2))
+    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    for t, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        for i, side in enumerate(("l", "r")):
+            g = foot_geoms[side]
+            pts = data.geom_xpos[g] + (corners * model.geom_size[g]) @ data.geom_xmat[g].reshape(3, 3).T
+            out[t, i] = pts[:, 2].min()
+    return out
+
+
+def run_inputs(body: Body, kin: KinematicFit, obs: Observations) -> dict:
+    """What a dynamics run depends on besides its config (for the checkpoint key)."""
+    return {"qpos": kin.qpos, "fps": kin.fps, "keypoints2d": obs.keypoints2d,
+            "camera_K": kin.camera_K, "T_world2cam": kin.T_world2cam, "body_xml": body.xml}
+
+
+def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Observations,
+                      config: DynamicsConfig = DynamicsConfig(), *,
+                      checkpoint_dir: str | Path | None = None, checkpoints: bool = True,
+                      progress: bool = True) -> PhysicsResult:
+    """Simulated motion of ``body`` that reproduces the kinematic estimate and the detections.
+
+    checkpoint_dir: root of the run folders (default: the stage cache); checkpoints=False
+    writes and reads none. progress: a tqdm bar per window on stderr.
+    """
+    _check_inputs(kinematic_fit, observations)
+    timing: dict[str, float] = {}
+    t0 = time.perf_counter()
+    sim = sim_model(body)
+    setup = _setup(sim, kinematic_fit, observations, config)
+    timing["prepare"] = time.perf_counter() - t0
+    folder = None
+    if checkpoints:
+        key = checkpoint.run_key(config.identity(), run_inputs(body, kinematic_fit, observations))
+        folder = checkpoint.run_folder(key, checkpoint_dir)
+    run = _run_independent if config.independent else _run_sequential
+    with Simulator(sim, config.nthread) as simulator:
+        outputs, ctrl, records = run(setup, simulator, config, folder, progress, timing)
+    timing["total"] = time.perf_counter() - t0
+    timing["search"] = sum(r["seconds"] for r in records)
+    return PhysicsResult(
+        fps=kinematic_fit.fps, qpos=outputs["qpos"], joints=outputs["joints"],
+        landmarks=outputs["landmarks"], com=outputs["com"],
+        foot_heights=foot_heights(sim.model, outputs["qpos"], body.foot_geom_ids), ctrl=ctrl,
+        windows=records, timings=timing, config=config.identity())

@@ -1,0 +1,45 @@
+"""`PhysicsResult`: the dynamics stage's output, the simulated motion sampled at the frames."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True, eq=False)
+class PhysicsResult:
+    """Simulated motion at the frame times (world frame, z up, ground z = 0, metres).
+
+    qpos (T, 55) MuJoCo coordinates; joints (T, 21, 3) JOINT_NAMES; landmarks (T, 33, 3)
+    landmark sites (MediaPipe order); com (T, 3) centre of mass; foot_heights (T, 2) lowest
+    point of the left and right foot boxes (m); ctrl (S, 48) the servo targets applied at every
+    200 Hz step (sequential windows) or the windows' targets one after another (independent).
+    windows: one record per window (frames, steps, evaluations, initial and final loss and
+    terms, seconds). timings: seconds per sub-step. config: the resolved DynamicsConfig.
+    """
+
+    fps: float
+    qpos: np.ndarray
+    joints: np.ndarray
+    landmarks: np.ndarray
+    com: np.ndarray
+    foot_heights: np.ndarray
+    ctrl: np.ndarray
+    windows: list[dict] = dataclasses.field(default_factory=list)
+    timings: dict = dataclasses.field(default_factory=dict)
+    config: dict = dataclasses.field(default_factory=dict)
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.qpos.shape[0])
+
+    def losses(self) -> dict[str, float]:
+        """Final loss terms averaged over windows (unweighted), plus the weighted total."""
+        if not self.windows:
+            return {}
+        names = self.windows[0]["terms_final"].keys()
+        out = {n: float(np.mean([w["terms_final"][n] for w in self.windows])) for n in names}
+        out["total"] = float(np.mean([w["loss_final"] for w in self.windows]))
+        return out

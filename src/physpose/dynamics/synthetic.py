@@ -1,0 +1,92 @@
+"""Physically real test motions: the body simulated under known smooth servo targets.
+
+Used by the recovery test and the dynamics benchmark: the motion is given as the kinematic
+input (and its projection as detections, confidence 1), so the optimiser's job is to find
+targets that reproduce it. Motions start from the standing keyframe:
+
+- ``stand``: quiet standing with a slow arm movement;
+- ``shift``: a lateral weight shift (hips and ankles roll) with arm swings;
+- ``step``: the weight shift plus lifting the unloaded foot about 5 cm and setting it down.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from physpose.body import Body, standing_qpos
+from physpose.dynamics.objective import project
+from physpose.dynamics.rollout import Simulator, make_state, sim_model
+from physpose.kinematics.result import KinematicFit
+from physpose.observations import Observations
+from physpose.skeleton import DOF_NAMES, NV
+
+MOTIONS = ("stand", "shift", "step")
+IMAGE_SIZE = (1280, 720)  # px
+FOCAL = 1000.0            # px
+CAMERA_DISTANCE = 4.0     # m in front of the person
+CAMERA_HEIGHT = 1.2       # m
+
+
+def _dof(name: str) -> int:
+    return DOF_NAMES.index(name)
+
+
+def motion_targets(body: Body, kind: str, seconds: float) -> np.ndarray:
+    """Servo targets (S, 48) at every simulation step of the named motion."""
+    if kind not in MOTIONS:
+        raise ValueError(f"unknown motion {kind!r}; choose one of {MOTIONS}")
+    q0 = standing_qpos(body)
+    dt = body.model.opt.timestep
+    t = np.arange(int(round(seconds / dt))) * dt
+    targets = np.tile(q0[7:], (len(t), 1))
+    ease = np.minimum(t / 0.5, 1.0)
+    wave = np.sin(np.pi * t) * ease  # 0.5 Hz
+    targets[:, _dof("r_elbow_y")] -= 0.4 * (1.0 - np.cos(np.pi * t)) / 2.0
+    if kind == "stand":
+        return targets
+    for side in "lr":
+        targets[:, _dof(f"{side}_hip_x")] += 0.04 * wave
+        targets[:, _dof(f"{side}_ankle_x")] -= 0.04 * wave
+    targets[:, _dof("l_shoulder_y")] -= 0.3 * wave
+    if kind == "step":
+        lift = np.where((t > 0.45) & (t < 0.95), np.sin(np.pi * (t - 0.45) / 0.5), 0.0)
+        targets[:, _dof("l_hip_y")] -= 0.4 * lift
+        targets[:, _dof("l_knee_y")] += 0.7 * lift
+    return targets
+
+
+def virtual_camera() -> tuple[np.ndarray, np.ndarray]:
+    """(K (3, 3), T_world2cam (4, 4)): a level camera in front of a person facing +x."""
+    K = np.array([[FOCAL, 0.0, IMAGE_SIZE[0] / 2], [0.0, FOCAL, IMAGE_SIZE[1] / 2],
+                  [0.0, 0.0, 1.0]])
+    R = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, -1.0], [-1.0, 0.0, 0.0]])  # rows: cam x, y, z
+    centre = np.array([CAMERA_DISTANCE, 0.0, CAMERA_HEIGHT])
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, -R @ centre
+    return K, T
+
+
+def simulated_clip(body: Body, kind: str = "step", seconds: float = 2.0, fps: float = 25.0
+                   ) -> tuple[KinematicFit, Observations, np.ndarray]:
+    """(kinematic input, detections, true targets (S, 48)) of a simulated motion."""
+    targets = motion_targets(body, kind, seconds)
+    sim = sim_model(body)
+    state0 = make_state(sim, standing_qpos(body), np.zeros(NV))
+    with Simulator(sim, nthread=1) as simulator:
+        traj = simulator.run(state0, targets[None])
+    frames = np.arange(int(round(seconds * fps)) + 1)
+    samples = traj.at(frames / (fps * sim.dt))
+    if samples.broken.any():
+        raise RuntimeError(f"the simulated {kind} motion broke")
+    K, T = virtual_camera()
+    landmarks = samples.landmarks[0]
+    uv = project(landmarks, K, T)
+    keypoints = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
+    fit = KinematicFit(fps=fps, shape=body.shape, qpos=samples.qpos[0], joints=samples.joints[0],
+                       landmarks=landmarks, camera_K=K, T_world2cam=T, variant="simulated",
+                       ground_estimated=False)
+    obs = Observations(source=f"simulated:{kind}", fps=fps, image_size=IMAGE_SIZE,
+                       timestamps=frames / fps, keypoints2d=keypoints,
+                       detected=np.ones(len(frames), dtype=bool),
+                       interpolated=np.zeros(len(frames), dtype=bool), camera_K=K)
+    return fit, obs, targets

@@ -1,0 +1,141 @@
+"""Temporal windows: where each window starts and ends, and one window's search problem.
+
+Times live on the simulation's step grid (step n at n * dt seconds); frame j is at j / fps,
+i.e. at fractional step position j / (fps dt). A window spans frames [first, last]; its
+simulation starts at the step at or just before its first frame and runs to the step at or just
+after its last one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, evaluate_terms,
+                                         invalid_from, total)
+from physpose.dynamics.rollout import FrameSamples, Trajectories
+
+
+@dataclass(frozen=True)
+class Window:
+    """Frames [first, last] (inclusive) simulated over steps [start_step, end_step]."""
+
+    index: int
+    first: int
+    last: int
+    start_step: int
+    end_step: int
+
+    @property
+    def num_steps(self) -> int:
+        return self.end_step - self.start_step
+
+    @property
+    def frames(self) -> np.ndarray:
+        return np.arange(self.first, self.last + 1)
+
+
+def step_position(frame: np.ndarray | int, fps: float, dt: float) -> np.ndarray:
+    """Fractional simulation step of frame(s)."""
+    return np.asarray(frame, dtype=float) / (fps * dt)
+
+
+def plan_windows(num_frames: int, fps: float, dt: float, window: float, overlap: float,
+                 anchor_last: bool = False) -> list[Window]:
+    """Overlapping windows of ``window`` s sharing ``overlap`` s, covering every frame.
+
+    The last window ends on the last frame; with ``anchor_last`` it also keeps the full
+    length (starting earlier, so it may overlap its predecessor more).
+    """
+    length = max(2, int(round(window * fps)))
+    shared = min(max(0, int(round(overlap * fps))), length - 1)
+    stride = length - shared
+    last_frame = num_frames - 1
+    starts = [0]
+    while starts[-1] + length < last_frame:
+        starts.append(starts[-1] + stride)
+    if anchor_last and len(starts) > 1:
+        starts[-1] = max(0, last_frame - length)
+    out = []
+    for i, first in enumerate(starts):
+        last = min(first + length, last_frame)
+        out.append(Window(index=i, first=first, last=last,
+                          start_step=int(math.floor(step_position(first, fps, dt) + 1e-9)),
+                          end_step=int(math.ceil(step_position(last, fps, dt) - 1e-9))))
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class WindowProblem:
+    """One window's search: ctrl = fixed_ctrl + basis @ x for x (nfree, 48), from state0.
+
+    free: which of the clip's spline coefficients x stands for. basis (S, nfree): the free coefficients' spline basis at the window's steps;
+    fixed_ctrl (S, 48): the contribution of every other coefficient; x0 (nfree, 48) start.
+    positions (F,): the frames' step positions relative to start_step. history (H, 21, 3).
+    """
+
+    window: Window
+    state0: np.ndarray
+    free: slice
+    basis: np.ndarray
+    fixed_ctrl: np.ndarray
+    x0: np.ndarray
+    positions: np.ndarray
+    history: np.ndarray | None
+
+    def ctrl(self, x: np.ndarray) -> np.ndarray:
+        """Servo targets (B, S, 48) for flat coefficient vectors x (B, nfree * 48)."""
+        coefs = np.asarray(x, dtype=float).reshape(len(x), *self.x0.shape)
+        return self.fixed_ctrl + np.matmul(self.basis, coefs)
+
+
+@dataclass(frozen=True, eq=False)
+class Scores:
+    """A batch's objective: terms (B,) per name, total (B,) (+inf when invalid), first bad frame."""
+
+    terms: dict[str, np.ndarray]
+    total: np.ndarray
+    invalid_from: np.ndarray
+
+
+def score(problem: WindowProblem, traj: Trajectories, ref: ObjectiveReference,
+          weights: ObjectiveWeights, max_root_distance: float, max_penetration: float
+          ) -> tuple[Scores, FrameSamples]:
+    """Sample a batch's trajectories at the window's frames and evaluate the objective."""
+    samples = traj.at(problem.positions)
+    frames = problem.window.frames
+    terms = evaluate_terms(samples, ref, frames, problem.history, weights)
+    bad = invalid_from(samples, ref, frames, max_root_distance, max_penetration)
+    value = total(terms, weights)
+    value = np.where((bad < len(frames)) | ~np.isfinite(value), np.inf, value)
+    return Scores(terms=terms, total=value, invalid_from=bad), samples
+
+
+def ranked_fitness(scores: Scores, num_frames: int) -> np.ndarray:
+    """Finite fitness for CMA-ES: invalid samples rank below every valid one, and among
+    themselves by how early they failed."""
+    value = scores.total.copy()
+    valid = np.isfinite(value)
+    worst = max(1e6, 10.0 * float(np.max(np.abs(value[valid])))) if valid.any() else 1e6
+    value[~valid] = worst + (num_frames - scores.invalid_from[~valid])
+    return value
+
+
+def blend_weights(windows: list[Window], num_frames: int) -> np.ndarray:
+    """(W, T) weights joining independently optimised windows: linear cross-fades where
+    windows overlap, each frame's weights summing to 1."""
+    w = np.zeros((len(windows), num_frames))
+    for i, win in enumerate(windows):
+        ramp = np.ones(win.last - win.first + 1)
+        if i > 0:
+            n = windows[i - 1].last - win.first + 1
+            if n > 0:
+                ramp[:n] = np.minimum(ramp[:n], (np.arange(n) + 1.0) / (n + 1.0))
+        if i + 1 < len(windows):
+            n = win.last - windows[i + 1].first + 1
+            if n > 0:
+                ramp[-n:] = np.minimum(ramp[-n:], (n - np.arange(n)) / (n + 1.0))
+        w[i, win.first:win.last + 1] = ramp
+    return w / w.sum(axis=0, keepdims=True)
