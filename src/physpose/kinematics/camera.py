@@ -1,0 +1,97 @@
+"""The static pinhole camera of the fit and the world frame it places the person in.
+
+The fit works in OpenCV camera axes (x right, y down, z forward). The output world frame
+(../shared/DESIGN.md) follows from a ground plane {x : n . x + d = 0} given in camera axes,
+n the unit up normal: world z = n (ground z = 0, so the camera is d above it), world x = the
+camera's viewing direction projected onto the ground (so the camera looks along +x, and at
+world yaw 0 the person seen from the front faces -x), y = z x x, and the origin on the ground
+below the person's pelvis in the first frame with a detection.
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from physpose.errors import PhysposeError
+
+UP_LEVEL = np.array([0.0, -1.0, 0.0])  # the up direction of a level camera, camera axes
+
+
+def focal_from_fov(image_size: tuple[int, int], diagonal_fov_deg: float) -> float:
+    """Focal length (px) giving the field of view across the image diagonal."""
+    half_diagonal = 0.5 * float(np.hypot(*image_size))
+    return half_diagonal / float(np.tan(np.radians(diagonal_fov_deg) / 2))
+
+
+def intrinsics(image_size: tuple[int, int], focal: float) -> np.ndarray:
+    """(3, 3) K with square pixels and the principal point at the image centre."""
+    width, height = image_size
+    return np.array([[focal, 0.0, width / 2.0], [0.0, focal, height / 2.0], [0.0, 0.0, 1.0]])
+
+
+def check_intrinsics(K: np.ndarray, source: str) -> np.ndarray:
+    """K as a float (3, 3) array; PhysposeError if it is not a plausible pinhole matrix."""
+    K = np.asarray(K, dtype=float)
+    if K.shape != (3, 3) or not np.isfinite(K).all() or K[0, 0] <= 0 or K[1, 1] <= 0 \
+            or not np.allclose(K[2], [0.0, 0.0, 1.0]):
+        raise PhysposeError(f"camera intrinsics {K.tolist()} are not a pinhole matrix",
+                            path=source, remedy="give K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]")
+    return K
+
+
+def project(K, points):
+    """Pixels of camera-frame points: (..., 3) -> (..., 2). Works on NumPy and JAX arrays."""
+    z = points[..., 2:3]
+    xp = jnp if isinstance(points, jnp.ndarray) else np
+    z = xp.maximum(z, 1e-3)
+    uv = points[..., :2] / z
+    return uv * xp.stack([K[0, 0], K[1, 1]]) + xp.stack([K[0, 2], K[1, 2]])
+
+
+def rays(K: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """Unit viewing directions (camera axes) of pixels (..., 2) -> (..., 3)."""
+    xy = (np.asarray(pixels, dtype=float) - K[:2, 2]) / np.diag(K)[:2]
+    d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def rotation_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotations taking unit vectors a (..., 3) to b (..., 3): (..., 3, 3)."""
+    a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
+    v = np.cross(a, b)
+    c = np.sum(a * b, axis=-1)[..., None, None]
+    vx = np.zeros(v.shape[:-1] + (3, 3))
+    vx[..., 0, 1], vx[..., 0, 2], vx[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    vx = vx - np.swapaxes(vx, -1, -2)
+    return np.eye(3) + vx + vx @ vx / np.maximum(1.0 + c, 1e-9)
+
+
+def world_from_plane(normal: np.ndarray, offset: float, origin_cam: np.ndarray) -> np.ndarray:
+    """(4, 4) T_world2cam of the world frame of a ground plane (see the module docstring).
+
+    normal: (3,) up normal in camera axes; offset: d in n . x + d = 0 (the camera height, m);
+    origin_cam: (3,) a camera-frame point whose ground projection becomes the world origin.
+    """
+    n = np.asarray(normal, dtype=float)
+    n = n / np.linalg.norm(n)
+    forward = np.array([0.0, 0.0, 1.0]) - n[2] * n
+    if np.linalg.norm(forward) < 1e-6:  # camera looking straight down: use its image up
+        forward = -np.array([0.0, 1.0, 0.0]) + n[1] * n
+    x = forward / np.linalg.norm(forward)
+    y = np.cross(n, x)
+    R_cam2world = np.stack([x, y, n])          # rows: world axes in camera coordinates
+    o = np.asarray(origin_cam, dtype=float)
+    o = o - (n @ o + offset) * n               # the origin's foot point on the plane
+    T_cam2world = np.eye(4)
+    T_cam2world[:3, :3] = R_cam2world
+    T_cam2world[:3, 3] = -R_cam2world @ o
+    return np.linalg.inv(T_cam2world)
+
+
+def plane_from_world(T_world2cam: np.ndarray) -> tuple[np.ndarray, float]:
+    """(normal (3,), offset) in camera axes of the world's ground z = 0."""
+    R = T_world2cam[:3, :3]
+    n = R @ np.array([0.0, 0.0, 1.0])
+    centre_world = -R.T @ T_world2cam[:3, 3]
+    return n, float(centre_world[2])

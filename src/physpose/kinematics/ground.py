@@ -1,0 +1,137 @@
+"""The ground plane T_g (+G): the paper's L_gp over the fitted body, and the level-camera guess.
+
+L_gp(T_g) = sum_t ||min(delta, L_k(D_left^t))|| + ||min(delta, L_k(D_right^t))||
+            + 2 ||min(delta, L_k(D_body^t))||,
+D the signed distances of surface points to the plane and L_k the k smallest. It places the
+body in contact with the ground without preferring particular contact points and ignores
+frames in the air. Where the contacts alone leave the plane's tilt open (a person standing on
+one spot), two priors decide: balance (averaged over the clip, the body's centre of mass lies
+above its support, the centroid of the lowest surface points) and a weak one that the camera's
+roll about its optical axis is small. The plane is searched from several starts (the level
+camera's up, the mean balance direction, the normal of the lowest foot points) and the best
+minimum wins.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from physpose.kinematics.camera import UP_LEVEL
+from physpose.kinematics.config import GroundConfig
+from physpose.kinematics.losses import ground_term
+from physpose.kinematics.optim import minimize
+
+_GP_SCALE = 0.02  # m: L_gp is divided by this, so a 2 cm change weighs like one prior sigma
+
+
+class PlaneParams(NamedTuple):
+    tilt: np.ndarray    # (2,) normal = normalise(n0 + tilt[0] e1 + tilt[1] e2)
+    offset: np.ndarray  # () d in n . x + d = 0
+
+
+def _basis(n0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    e1 = np.cross(n0, [0.0, 0.0, 1.0])
+    if np.linalg.norm(e1) < 1e-6:
+        e1 = np.cross(n0, [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(n0, e1)
+
+
+def _normal(tilt, n0, e1, e2):
+    n = n0 + tilt[0] * e1 + tilt[1] * e2
+    return n / jnp.linalg.norm(n)
+
+
+_SUPPORT_BAND = 0.03  # m: surface points this close to the lowest one form the support
+
+
+def _plane_loss(p: PlaneParams, n0, e1, e2, points, left, right, balance, roll_sigma,
+                balance_sigma, *, k, delta, body_weight):
+    n = _normal(p.tilt, n0, e1, e2)
+    dist = points @ n + p.offset                                   # (T, P)
+    per = (ground_term(dist[:, left], k, delta) + ground_term(dist[:, right], k, delta)
+           + body_weight * ground_term(dist, k, delta)) / _GP_SCALE
+    roll = jnp.arctan2(n[0], -n[1])
+    lean = jnp.mean(2.0 * (1.0 - balance @ n)) / balance_sigma ** 2
+    return jnp.mean(per) + (roll / roll_sigma) ** 2 + lean
+
+
+_plane_value_and_grad = jax.jit(jax.value_and_grad(_plane_loss),
+                                static_argnames=("k", "delta", "body_weight"))
+
+
+def balance_directions(points: np.ndarray, com: np.ndarray, up: np.ndarray) -> np.ndarray:
+    """Unit vectors (T, 3) from each frame's support (centroid of the surface points within
+    _SUPPORT_BAND of the lowest along `up`) to its centre of mass."""
+    heights = points @ up
+    near = heights <= heights.min(axis=1, keepdims=True) + _SUPPORT_BAND
+    support = (points * near[..., None]).sum(1) / near.sum(1, keepdims=True)
+    b = com - support
+    return b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-9)
+
+
+def _lowest_foot_normal(points: np.ndarray, feet: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """Normal of the least-squares plane through each frame's lowest foot point."""
+    heights = points[:, feet] @ fallback
+    low = points[:, feet][np.arange(len(points)), np.argmin(heights, axis=1)]
+    if len(low) < 3:
+        return fallback
+    centred = low - low.mean(axis=0)
+    _, s, vt = np.linalg.svd(centred, full_matrices=False)
+    if s[1] < 0.2 * s[0] or s[1] < 0.05:  # contacts along a line or on one spot: no plane
+        return fallback
+    n = vt[2]
+    return n if n @ fallback > 0 else -n
+
+
+def estimate_plane(points: np.ndarray, left: np.ndarray, right: np.ndarray, com: np.ndarray,
+                   cfg: GroundConfig) -> tuple[np.ndarray, float]:
+    """The ground plane (4,) = (n, d), n . x + d = 0 with n up, from posed surface points.
+
+    points: (T, P, 3) camera axes, frames with evidence only; left, right: (P,) bool sole
+    points of each foot; com: (T, 3) centres of mass. Returns the plane and its loss.
+    """
+    points = np.asarray(points, dtype=float)
+    feet = np.flatnonzero(left | right)
+    balance = balance_directions(points, com, UP_LEVEL)
+    mean = balance.mean(axis=0)
+    starts = [UP_LEVEL, mean / np.linalg.norm(mean)]
+    starts.append(_lowest_foot_normal(points, feet, starts[1]))
+    best = None
+    for n0 in starts:
+        n = n0
+        for _ in range(2):  # the support (hence the balance directions) depends on the normal
+            value, n, d = _fit_plane(points, left, right,
+                                     balance_directions(points, com, n), n, cfg)
+        if best is None or value < best[0]:
+            best = (value, n, d)
+    value, n, d = best
+    return np.concatenate([n, [d]]), value
+
+
+def _fit_plane(points, left, right, balance, n0, cfg: GroundConfig):
+    e1, e2 = _basis(n0)
+    feet = np.flatnonzero(left | right)
+    d0 = -float(np.percentile(np.min(points[:, feet] @ n0, axis=1), 10.0))
+    args = (n0, e1, e2, points, np.flatnonzero(left), np.flatnonzero(right), balance,
+            np.radians(cfg.roll_sigma_deg), np.radians(cfg.balance_sigma_deg))
+
+    def value_and_grad(p: PlaneParams):
+        return _plane_value_and_grad(p, *args, k=cfg.k, delta=cfg.delta,
+                                     body_weight=cfg.body_weight)
+
+    res = minimize(value_and_grad, PlaneParams(np.zeros(2), np.asarray(d0)),
+                   ("tilt", "offset"), iterations=200)
+    n = np.asarray(_normal(res.params.tilt, n0, e1, e2))
+    return res.value, n, float(res.params.offset)
+
+
+def level_plane(points: np.ndarray, feet: np.ndarray, percentile: float) -> np.ndarray:
+    """The level-camera guess (no +G): up = -y (camera axes), the floor under the lowest sole
+    point in `percentile` % of frames. points: (T, P, 3); feet: (P,) bool. Returns (4,)."""
+    heights = np.min(points[:, feet] @ UP_LEVEL, axis=1)
+    return np.concatenate([UP_LEVEL, [-float(np.percentile(heights, percentile))]])
