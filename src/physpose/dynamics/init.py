@@ -25,6 +25,7 @@ import mujoco
 import numpy as np
 from scipy.optimize import nnls
 
+from physpose.dynamics import quat
 from physpose.dynamics.spline import KnotGrid, fit_coefficients
 from physpose.skeleton import DOF_LIMITS, NQ, NV
 
@@ -52,19 +53,6 @@ class Reference:
         return int(self.qpos.shape[0]) - 1
 
 
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
-                     aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
-
-
-def _conj(q: np.ndarray) -> np.ndarray:
-    return q * np.array([1.0, -1.0, -1.0, -1.0])
-
-
 def align_quaternion_signs(quat: np.ndarray) -> np.ndarray:
     """Flip quaternions (T, 4) so consecutive ones have a non-negative dot product."""
     q = np.array(quat, dtype=float)
@@ -88,13 +76,13 @@ def smooth_reference(qpos: np.ndarray, fps: float, dt: float, num_steps: int,
     nearest = values[np.clip(np.round(grid.centres() * fps).astype(int), 0, len(values) - 1)]
     coefs = fit_coefficients(basis, values, ridge=1e-3, prior=nearest)
     pos, vel, acc = (grid.basis(t_steps, derivative=d) @ coefs for d in (0, 1, 2))
-    quat, dquat, ddquat = pos[:, 3:7], vel[:, 3:7], acc[:, 3:7]
-    norm = np.linalg.norm(quat, axis=-1, keepdims=True)
-    unit = quat / norm
+    rot, drot, ddrot = pos[:, 3:7], vel[:, 3:7], acc[:, 3:7]
+    norm = np.linalg.norm(rot, axis=-1, keepdims=True)
+    unit = rot / norm
     # d(q/|q|)/dt for the angular velocity; omega_local = 2 (q* x qdot)_vec for a unit q.
-    dunit = dquat / norm - unit * np.sum(unit * dquat, axis=-1, keepdims=True) / norm
-    omega = 2.0 * _quat_mul(_conj(unit), dunit)[:, 1:]
-    alpha = 2.0 * _quat_mul(_conj(unit), ddquat / norm)[:, 1:]
+    dunit = drot / norm - unit * np.sum(unit * drot, axis=-1, keepdims=True) / norm
+    omega = 2.0 * quat.multiply(quat.conjugate(unit), dunit)[:, 1:]
+    alpha = 2.0 * quat.multiply(quat.conjugate(unit), ddrot / norm)[:, 1:]
     qp = np.concatenate([pos[:, :3], unit, pos[:, 7:]], axis=1)
     qv = np.concatenate([vel[:, :3], omega, vel[:, 7:]], axis=1)
     qa = np.concatenate([acc[:, :3], alpha, acc[:, 7:]], axis=1)

@@ -16,7 +16,7 @@ over frames; with one window length that is the same up to a constant factor). U
   the camera and the person's distance; in metres it has the magnitude of the 3d terms, as the
   paper's tuning intended ("roughly equal magnitudes").
 - ``prior`` (stands in for eq. 4, the normalising-flow pose prior, which is not available):
-  |z| with z = (angle - neutral) / spread per hinge, a diagonal Gaussian pose prior whose mean
+  |z| / sqrt(48) (the RMS z, so its size is that of one hinge's z) with z = (angle - neutral) / spread per hinge, a diagonal Gaussian pose prior whose mean
   is the upright neutral pose and whose standard deviation is a quarter of each hinge's
   anatomical range (so the range is the prior's +-2 sigma band; narrow secondary axes such as
   knee ab/adduction are held tightly). Like the flow prior's |z| it is small for ordinary poses
@@ -38,6 +38,7 @@ from dataclasses import dataclass, fields
 import mujoco
 import numpy as np
 
+from physpose.dynamics import quat
 from physpose.dynamics.rollout import FrameSamples
 from physpose.metrics import transform_points
 from physpose.skeleton import DOF_LIMITS, NUM_JOINTS3
@@ -90,28 +91,12 @@ class ObjectiveReference:
     fps: float
 
 
-def _axis_quat(angle: np.ndarray, axis: int) -> np.ndarray:
-    q = np.zeros(angle.shape + (4,))
-    q[..., 0] = np.cos(0.5 * angle)
-    q[..., 1 + axis] = np.sin(0.5 * angle)
-    return q
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternions (..., 4) w,x,y,z."""
-    aw, ax, ay, az = np.moveaxis(a, -1, 0)
-    bw, bx, by, bz = np.moveaxis(b, -1, 0)
-    return np.stack([aw * bw - ax * bx - ay * by - az * bz,
-                     aw * bx + ax * bw + ay * bz - az * by,
-                     aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw], axis=-1)
-
-
 def joint_quaternions(qpos: np.ndarray) -> np.ndarray:
     """Root and joint rotations (..., 17, 4) from qpos (..., 55); joints R = Ry(a) Rx(b) Rz(c)."""
     ang = qpos[..., 7:].reshape(qpos.shape[:-1] + (NUM_JOINTS3, 3))
-    joints = quat_mul(quat_mul(_axis_quat(ang[..., 0], 1), _axis_quat(ang[..., 1], 0)),
-                      _axis_quat(ang[..., 2], 2))
+    joints = quat.multiply(quat.multiply(quat.about_axis(ang[..., 0], 1),
+                                         quat.about_axis(ang[..., 1], 0)),
+                           quat.about_axis(ang[..., 2], 2))
     root = qpos[..., 3:7] / np.linalg.norm(qpos[..., 3:7], axis=-1, keepdims=True)
     return np.concatenate([root[..., None, :], joints], axis=-2)
 
@@ -150,9 +135,8 @@ def _cost_com(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, hist
 
 def _cost_pose(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history
                ) -> np.ndarray:
-    quats = joint_quaternions(s.qpos[:, 1:])
-    dot = np.abs(np.sum(quats * ref.quats[frames[1:]], axis=-1))
-    return np.arccos(np.minimum(dot, 1.0)).sum(axis=-1).mean(axis=1)
+    angle = quat.half_angle(ref.quats[frames[1:]], joint_quaternions(s.qpos[:, 1:]))
+    return angle.sum(axis=-1).mean(axis=1)
 
 
 def project(points: np.ndarray, K: np.ndarray, T_world2cam: np.ndarray) -> np.ndarray:
@@ -174,7 +158,7 @@ def _cost_reprojection(s: FrameSamples, ref: ObjectiveReference, frames: np.ndar
 def _cost_prior(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history
                 ) -> np.ndarray:
     z = (s.qpos[:, 1:, 7:] - _PRIOR_MEAN) / _PRIOR_STD
-    return np.linalg.norm(z, axis=-1).mean(axis=1)
+    return np.linalg.norm(z, axis=-1).mean(axis=1) / np.sqrt(z.shape[-1])
 
 
 def _cost_tv(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history

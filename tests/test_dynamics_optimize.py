@@ -1,0 +1,126 @@
+"""The windowed optimiser on a tiny simulated clip: determinism, checkpoint/resume, both modes,
+ablation configs and input checks."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from physpose.body import build_body
+from physpose.dynamics import ABLATIONS, PRESETS, DynamicsConfig, ablated, optimize_dynamics
+from physpose.dynamics import checkpoint
+from physpose.dynamics.synthetic import simulated_clip
+from physpose.dynamics.windows import blend_weights, plan_windows
+from physpose.errors import PhysposeError
+from physpose.shape import BodyShape
+
+TINY = DynamicsConfig(window=0.4, overlap=0.16, popsize=4, iterations=2, knot_spacing=0.1)
+
+
+@pytest.fixture(scope="module")
+def clip():
+    """A standing clip whose kinematic estimate carries a smooth error (so the search moves)."""
+    body = build_body(BodyShape.from_height(1.7))
+    fit, obs, _ = simulated_clip(body, "stand", seconds=0.8)
+    t = np.arange(fit.num_frames)[:, None] / fit.fps
+    qpos = fit.qpos.copy()
+    qpos[:, 7:] += 0.03 * np.sin(2 * np.pi * 1.5 * t + np.arange(48)[None])
+    return body, dataclasses.replace(fit, qpos=qpos), obs
+
+
+def run(clip, cfg=TINY, **kwargs):
+    body, fit, obs = clip
+    return optimize_dynamics(body, fit, obs, cfg, progress=False, **kwargs)
+
+
+def test_result_shapes_and_records(clip):
+    body, fit, _ = clip
+    res = run(clip, checkpoints=False)
+    t = fit.num_frames
+    assert res.qpos.shape == (t, 55) and res.joints.shape == (t, 21, 3)
+    assert res.landmarks.shape == (t, 33, 3) and res.com.shape == (t, 3)
+    assert res.foot_heights.shape == (t, 2)
+    assert res.ctrl.shape == (int(round((t - 1) / fit.fps / body.model.opt.timestep)), 48)
+    assert len(res.windows) == len(plan_windows(t, fit.fps, 0.005, 0.4, 0.16)) >= 3
+    for w in res.windows:
+        assert w["evaluations"] == 1 + TINY.iterations * (TINY.popsize + 1)
+        assert w["loss_final"] <= w["loss_initial"]
+        assert set(w["terms_final"]) == {"com", "pose", "reprojection", "prior", "tv", "lim"}
+    # The standing body keeps its feet on the floor and stays near the true motion.
+    assert np.abs(res.foot_heights).max() < 0.01
+    assert np.linalg.norm(res.joints - fit.joints, axis=-1).mean() < 0.03
+
+
+def test_same_seed_same_result_and_another_seed_differs(clip):
+    a = run(clip, checkpoints=False)
+    b = run(clip, checkpoints=False)
+    np.testing.assert_array_equal(a.qpos, b.qpos)
+    c = run(clip, dataclasses.replace(TINY, seed=7), checkpoints=False)
+    assert not np.array_equal(a.ctrl, c.ctrl)
+
+
+@pytest.mark.parametrize("independent", [False, True])
+def test_interrupted_run_resumes_to_the_uninterrupted_result(clip, tmp_path, monkeypatch,
+                                                             independent):
+    cfg = dataclasses.replace(TINY, independent=independent, parallel_windows=1)
+    whole = run(clip, cfg, checkpoint_dir=tmp_path / "a")
+    save = checkpoint.save_window
+
+    def save_then_stop(folder, index, arrays, record):
+        path = save(folder, index, arrays, record)
+        if index == 1:
+            raise KeyboardInterrupt
+        return path
+
+    monkeypatch.setattr(checkpoint, "save_window", save_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        run(clip, cfg, checkpoint_dir=tmp_path / "b")
+    monkeypatch.setattr(checkpoint, "save_window", save)
+    folder = next((tmp_path / "b").iterdir())
+    assert sorted(p.name for p in folder.iterdir()) == ["window_000.npz", "window_001.npz"]
+    resumed = run(clip, cfg, checkpoint_dir=tmp_path / "b")
+    np.testing.assert_array_equal(resumed.qpos, whole.qpos)
+    np.testing.assert_array_equal(resumed.ctrl, whole.ctrl)
+    # A changed config never reuses these windows.
+    run(clip, dataclasses.replace(cfg, seed=3), checkpoint_dir=tmp_path / "b")
+    assert len(list((tmp_path / "b").iterdir())) == 2
+
+
+def test_independent_windows_are_blended(clip):
+    res = run(clip, dataclasses.replace(TINY, independent=True), checkpoints=False)
+    assert np.isfinite(res.qpos).all()
+    np.testing.assert_allclose(np.linalg.norm(res.qpos[:, 3:7], axis=1), 1.0)
+    wins = plan_windows(41, 25.0, 0.005, 0.4, 0.16, anchor_last=True)
+    weights = blend_weights(wins, 41)
+    np.testing.assert_allclose(weights.sum(axis=0), 1.0)
+    assert wins[-1].last == 40 and wins[-1].last - wins[-1].first == 10
+
+
+def test_presets_and_ablations():
+    assert PRESETS["paper"].popsize == 100 and PRESETS["paper"].iterations == 2000
+    assert PRESETS["paper"].window == 1.0
+    for name, terms in ABLATIONS.items():
+        w = ablated(PRESETS["fast"], name).weights
+        for term in terms:
+            assert getattr(w, term) == 0.0
+        assert sum(getattr(w, t) > 0 for t in ("com", "pose", "reprojection", "prior")) \
+            == 4 - len(terms)
+    with pytest.raises(PhysposeError):
+        ablated(PRESETS["fast"], "nothing")
+    with pytest.raises(PhysposeError):
+        DynamicsConfig(overlap=2.0)
+
+
+def test_mismatched_inputs_are_refused(clip):
+    body, fit, obs = clip
+    with pytest.raises(PhysposeError, match="observed frames"):
+        optimize_dynamics(body, fit, obs.replace(keypoints2d=obs.keypoints2d[:-1],
+                                                 timestamps=obs.timestamps[:-1],
+                                                 detected=obs.detected[:-1],
+                                                 interpolated=obs.interpolated[:-1]),
+                          TINY, checkpoints=False, progress=False)
+    bad = dataclasses.replace(fit, qpos=np.where(np.arange(55) == 9, np.nan, fit.qpos))
+    with pytest.raises(PhysposeError, match="not finite"):
+        optimize_dynamics(body, bad, obs, TINY, checkpoints=False, progress=False)
