@@ -1,0 +1,53 @@
+"""Benchmark variants of the dynamics stage (registered with physpose.benchmark).
+
+``dynamics``: the paper's HUND+SO+GT + Dynamics analogue (SO+GT kinematics, then the
+trajectory optimisation with the default preset); ``dynamics-so``: on the SO kinematics;
+``dynamics-<ablation>`` (no2d, no3d, nocom, nocompose, noprior): the bottom half of the paper's
+Table 2, the full model with objective terms removed. Window checkpoints go to the stage cache,
+so an interrupted benchmark resumes its dynamics runs.
+"""
+
+from __future__ import annotations
+
+import time
+
+from physpose.benchmark.variants import VariantContext, register_variant
+from physpose.body import build_body
+from physpose.dynamics.optimize import ABLATIONS, PRESETS, DynamicsConfig, ablated, optimize_dynamics
+from physpose.kinematics.config import KinematicConfig
+from physpose.observations import Observations
+from physpose.reconstruction import Reconstruction
+
+
+def run_dynamics_variant(obs: Observations, context: VariantContext, kinematic_variant: str,
+                         config: DynamicsConfig, name: str) -> Reconstruction:
+    """Kinematic fit of the named variant, then dynamics; both fields in the reconstruction."""
+    from physpose.kinematics.fit import fit_kinematics  # noqa: PLC0415 (heavy JAX import)
+
+    start = time.perf_counter()
+    kin = fit_kinematics(obs, KinematicConfig.preset(kinematic_variant),
+                         camera_K=context.camera_K, height=context.person_height)
+    kin_s = time.perf_counter() - start
+    body = build_body(kin.shape)
+    phys = optimize_dynamics(body, kin, obs, config, progress=False)
+    recon = kin.to_reconstruction(obs, body_mjcf=body.xml)
+    meta = dict(recon.meta)
+    meta.update(variant=name, timings_s={"kinematics": kin_s, "dynamics": phys.timings["total"]},
+                dynamics={"losses": phys.losses(), "windows": phys.windows})
+    return recon.replace(joints_physics=phys.joints, qpos_physics=phys.qpos,
+                         landmarks_physics=phys.landmarks, meta=meta)
+
+
+def _variant(kinematic_variant: str, config: DynamicsConfig, name: str):
+    def fn(obs: Observations, context: VariantContext) -> Reconstruction:
+        return run_dynamics_variant(obs, context, kinematic_variant, config, name)
+
+    fn.__name__ = fn.__qualname__ = name.replace("-", "_")
+    return fn
+
+
+register_variant("dynamics", _variant("SO+GT", PRESETS["fast"], "dynamics"))
+register_variant("dynamics-so", _variant("SO", PRESETS["fast"], "dynamics-so"))
+for _ablation in ABLATIONS:
+    _name = f"dynamics-{_ablation}"
+    register_variant(_name, _variant("SO+GT", ablated(PRESETS["fast"], _ablation), _name))
