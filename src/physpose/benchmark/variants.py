@@ -21,6 +21,7 @@ from physpose.reconstruction import Reconstruction
 # Modules that define variants (imported lazily, in this order). One line per stage.
 PROVIDERS: list[str] = [
     "physpose.benchmark.baseline",
+    "physpose.kinematics.variants",
     "physpose.dynamics.variants",
 ]
 

@@ -19,6 +19,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "export",
     "benchmark",
     "reconstruct",
+    "fit",
 )
 
 

@@ -82,12 +82,16 @@ class PoseConfig:
 
 @dataclass(frozen=True)
 class GroundConfig:
-    """The ground plane (+G): the paper's L_gp, k smallest signed distances clipped at delta."""
+    """The ground plane (+G): the paper's L_gp, k smallest signed distances clipped at delta.
 
-    k: int = 20                       # smallest signed distances per frame and point set
+    The paper's k = 20 counts vertices of GHUM's ~10^4-vertex mesh, about an eighth of a sole;
+    our sole has surface.SOLE_GRID = 50 samples, so the same patch is k = 6.
+    """
+
+    k: int = 6                        # smallest signed distances per frame and point set
     delta: float = 0.2                # m, clip: frames in the air do not pull the plane
     body_weight: float = 2.0          # the whole-body term's weight against each foot's
-    foot_delta_pose: float = 0.05     # m, clip of the foot terms when re-fitting poses
+    foot_delta_pose: float = 0.02     # m, clip of the foot terms when re-fitting poses
     pose_scale: float = 0.01          # m, L_gp divided by this when re-fitting poses
     roll_sigma_deg: float = 30.0      # prior: the camera's roll about its optical axis
     balance_sigma_deg: float = 5.0    # prior: the mean support -> centre of mass direction

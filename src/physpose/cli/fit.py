@@ -1,0 +1,107 @@
+"""`physpose fit`: video or observations -> the kinematic estimate (reconstruction.npz, no
+physics), its config and an overlay video of the fitted body."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from physpose import __version__
+from physpose.errors import PhysposeError
+from physpose.kinematics.camera import check_intrinsics
+from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
+from physpose.kinematics.fit import fit_kinematics, stderr_log
+from physpose.observe import ObserveConfig
+
+RECONSTRUCTION_FILE = "reconstruction.npz"
+CONFIG_FILE = "config.json"
+OVERLAY_FILE = "overlay.mp4"
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "fit", help="fit the kinematic 3d estimate (shape, camera, ground, per-frame pose)",
+        description="Fit the body's shape, the camera, the ground plane and the per-frame pose "
+                    "to a video (observed with MediaPipe first) or to observations / keypoints "
+                    f"(.npz, .json). Writes {RECONSTRUCTION_FILE} (kinematic fields only), "
+                    f"{CONFIG_FILE} and {OVERLAY_FILE} into --out.")
+    p.add_argument("input", type=Path, metavar="VIDEO_OR_OBSERVATIONS",
+                   help="video file, observations.npz or a keypoints .json/.npz")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
+    p.add_argument("--variant", choices=VARIANT_NAMES, default="SO+GT",
+                   help="kinematic variant (paper's Table 1; default SO+GT)")
+    p.add_argument("--height", type=float, help="the person's standing height, m")
+    p.add_argument("--mass", type=float, help="the person's mass, kg")
+    p.add_argument("--fps", type=float, help="analysis frame rate for videos, Hz "
+                                             f"(default {ObserveConfig.target_fps:g})")
+    p.add_argument("--camera", type=Path, metavar="CALIB",
+                   help="camera intrinsics: a JSON file with K = [[fx,0,cx],[0,fy,cy],[0,0,1]] "
+                        "or a text file of the 9 numbers (default: estimated)")
+    p.add_argument("--no-cache", action="store_true", help="recompute even if cached")
+    p.add_argument("--no-overlay", action="store_true", help="skip the overlay video")
+    p.set_defaults(func=_run)
+
+
+def read_intrinsics(path: Path) -> np.ndarray:
+    """K (3, 3) from a JSON file ({"K": ...} or the bare matrix) or a text file of 9 numbers."""
+    if not path.is_file():
+        raise PhysposeError("camera file not found", path=path, remedy="check the path")
+    try:
+        if path.suffix.lower() == ".json":
+            doc = json.loads(path.read_text())
+            K = np.asarray(doc["K"] if isinstance(doc, dict) else doc, dtype=float)
+        else:
+            K = np.loadtxt(path, dtype=float)
+    except (ValueError, KeyError, TypeError, OSError) as exc:
+        raise PhysposeError(f"cannot read camera intrinsics ({exc})", path=path,
+                            remedy='write {"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]}') from None
+    return check_intrinsics(K.reshape(3, 3) if K.size == 9 else K, str(path))
+
+
+def _run(args: argparse.Namespace) -> int:
+    from physpose.kinematics.variants import reconstruction_of
+    from physpose.pipeline import load_observations
+
+    start = time.perf_counter()
+    if args.fps is not None and args.input.suffix.lower() in (".npz", ".json"):
+        raise PhysposeError("--fps applies to videos, not to observations", path=args.input,
+                            remedy="drop --fps")
+    observe_cfg = ObserveConfig(use_cache=not args.no_cache) if args.fps is None else \
+        ObserveConfig(target_fps=args.fps, use_cache=not args.no_cache)
+    obs = load_observations(args.input, observe_cfg, progress=sys.stderr.isatty())
+    K = read_intrinsics(args.camera) if args.camera is not None else None
+    config = KinematicConfig.preset(args.variant, use_cache=not args.no_cache)
+    fit = fit_kinematics(obs, config, height=args.height, mass=args.mass, camera_K=K,
+                         log=stderr_log)
+    if args.out.exists() and not args.out.is_dir():
+        raise PhysposeError("output path exists and is not a folder", path=args.out,
+                            remedy="pass a folder for --out")
+    args.out.mkdir(parents=True, exist_ok=True)
+    recon = reconstruction_of(fit, obs)
+    recon.save(args.out / RECONSTRUCTION_FILE)
+    resolved = {"stage": "kinematics", "physpose_version": __version__,
+                "input": str(args.input.resolve()), "variant": args.variant,
+                "height": args.height, "mass": args.mass,
+                "camera": None if args.camera is None else str(args.camera.resolve()),
+                "observe": dataclasses.asdict(observe_cfg),
+                "kinematics": dataclasses.asdict(config),
+                "camera_K": fit.camera_K.tolist(), "losses": fit.losses,
+                "timings_s": fit.timings, "shape": dataclasses.asdict(fit.shape)}
+    (args.out / CONFIG_FILE).write_text(json.dumps(resolved, indent=2) + "\n")
+    written = [args.out / RECONSTRUCTION_FILE, args.out / CONFIG_FILE]
+    if not args.no_overlay:
+        from physpose.render.overlay import render_overlay
+
+        written.append(render_overlay(args.out, args.out / OVERLAY_FILE,
+                                      progress=sys.stderr.isatty()).path)
+    print(f"fit: {Path(obs.source).name}: {fit.num_frames} frames, variant {fit.variant}, "
+          f"height {fit.shape.height:.2f} m, {time.perf_counter() - start:.1f} s")
+    for path in written:
+        print(f"  wrote {path}")
+    return 0
