@@ -7,14 +7,15 @@ window's other frames, so their values do not grow with the window's length (the
 over frames; with one window length that is the same up to a constant factor). Units:
 
 - ``com`` (paper eq. 1): |c - c_k|^2 + |c' - c'_k|^2, centre of mass (m) and its velocity (m/s,
-  finite differences over frames) against the kinematic estimate's.
+  finite differences over frames) against the kinematic estimate's (the velocity target from
+  the low-passed estimate, see `make_reference`).
 - ``pose`` (eq. 2): sum over the 16 joints and the root of arccos |<q, q_k>| (rad, half the
   rotation angle between simulated and kinematic joint rotations).
-- ``reprojection`` (eq. 3): sum over the 33 landmarks of confidence x image distance (px)
+- ``reprojection`` (eq. 3): mean over the 33 landmarks of confidence x image distance (px)
   between the projected landmark site and the detection, converted to metres at the person's
   depth (x depth / focal length, per frame). The paper sums raw pixels, whose size depends on
-  the camera and the person's distance; in metres it has the magnitude of the 3d terms, as the
-  paper's tuning intended ("roughly equal magnitudes").
+  the camera and the person's distance; per landmark and in metres the weighted term has the
+  magnitude of the others, as the paper's tuning intended ("roughly equal magnitudes").
 - ``prior`` (stands in for eq. 4, the normalising-flow pose prior, which is not available):
   |z| / sqrt(48) (the RMS z, so its size is that of one hinge's z) with z = (angle - neutral) / spread per hinge, a diagonal Gaussian pose prior whose mean
   is the upright neutral pose and whose standard deviation is a quarter of each hinge's
@@ -77,13 +78,14 @@ class ObjectiveReference:
     """What the simulated motion is scored against, per frame of the clip (T frames).
 
     qpos (T, 55) kinematic estimate; quats (T, 17, 4) its root and joint rotations (w,x,y,z);
-    com (T, 3) m; keypoints2d (T, 33, 3) px + confidence; camera_K (3, 3);
+    com (T, 3) m; com_velocity (T-1, 3) m/s between consecutive frames; keypoints2d (T, 33, 3) px + confidence; camera_K (3, 3);
     T_world2cam (4, 4); metres_per_px (T,) at the kinematic root's depth; fps Hz.
     """
 
     qpos: np.ndarray
     quats: np.ndarray
     com: np.ndarray
+    com_velocity: np.ndarray
     keypoints2d: np.ndarray
     camera_K: np.ndarray
     T_world2cam: np.ndarray
@@ -114,14 +116,20 @@ def centre_of_mass(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
 
 
 def make_reference(model: mujoco.MjModel, qpos: np.ndarray, keypoints2d: np.ndarray,
-                   camera_K: np.ndarray, T_world2cam: np.ndarray, fps: float
-                   ) -> ObjectiveReference:
-    """The per-frame targets from a kinematic estimate qpos (T, 55) and its detections."""
+                   camera_K: np.ndarray, T_world2cam: np.ndarray, fps: float,
+                   smooth_qpos: np.ndarray | None = None) -> ObjectiveReference:
+    """The per-frame targets from a kinematic estimate qpos (T, 55) and its detections.
+
+    smooth_qpos (T, 55): a low-passed estimate whose centre of mass gives the velocity target
+    (finite differences of a jittery estimate's COM would ask the body to jitter); default qpos.
+    """
+    smooth_com = centre_of_mass(model, qpos if smooth_qpos is None else smooth_qpos)
     depth = transform_points(T_world2cam, qpos[:, :3])[:, 2]
     focal = 0.5 * (camera_K[0, 0] + camera_K[1, 1])
     return ObjectiveReference(
         qpos=np.asarray(qpos, dtype=float), quats=joint_quaternions(qpos),
-        com=centre_of_mass(model, qpos), keypoints2d=np.asarray(keypoints2d, dtype=float),
+        com=centre_of_mass(model, qpos), com_velocity=np.diff(smooth_com, axis=0) * fps,
+        keypoints2d=np.asarray(keypoints2d, dtype=float),
         camera_K=np.asarray(camera_K, dtype=float), T_world2cam=np.asarray(T_world2cam, dtype=float),
         metres_per_px=np.maximum(depth, _MIN_DEPTH) / focal, fps=float(fps))
 
@@ -129,7 +137,7 @@ def make_reference(model: mujoco.MjModel, qpos: np.ndarray, keypoints2d: np.ndar
 def _cost_com(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history) -> np.ndarray:
     pos = np.sum((s.com[:, 1:] - ref.com[frames[1:]]) ** 2, axis=-1).mean(axis=1)
     vel = np.diff(s.com, axis=1) * ref.fps
-    vel_k = np.diff(ref.com[frames], axis=0) * ref.fps
+    vel_k = ref.com_velocity[frames[:-1]]
     return pos + np.sum((vel - vel_k) ** 2, axis=-1).mean(axis=1)
 
 
@@ -151,7 +159,7 @@ def _cost_reprojection(s: FrameSamples, ref: ObjectiveReference, frames: np.ndar
     uv = project(s.landmarks[:, 1:], ref.camera_K, ref.T_world2cam)
     kp = ref.keypoints2d[frames[1:]]
     dist = np.linalg.norm(uv - kp[..., :2], axis=-1)  # (B, F-1, 33) px
-    per_frame = np.sum(kp[..., 2] * dist, axis=-1) * ref.metres_per_px[frames[1:]]
+    per_frame = np.mean(kp[..., 2] * dist, axis=-1) * ref.metres_per_px[frames[1:]]
     return per_frame.mean(axis=1)
 
 

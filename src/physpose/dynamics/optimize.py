@@ -167,8 +167,9 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
     step_times = np.arange(num_steps) * dt
     grid = KnotGrid(cfg.knot_spacing, num_steps * dt)
     coefs0 = initial_coefficients(grid, step_times, targets[:num_steps])
+    frame_steps = np.round(step_position(np.arange(kin.num_frames), fps, dt)).astype(int)
     objective = make_reference(sim.model, kin.qpos, obs.keypoints2d, kin.camera_K,
-                               kin.T_world2cam, fps)
+                               kin.T_world2cam, fps, smooth_qpos=reference.qpos[frame_steps])
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
                   objective=objective, step_times=step_times)
 
