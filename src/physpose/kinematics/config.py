@@ -32,7 +32,7 @@ class ShapeConfig:
     seed_frames: int = 5             # n in the paper: frames with the highest mean confidence
     seed_spacing_s: float = 0.2      # s, seed frames at least this far apart (when possible)
     bone_log_sigma: float = 0.12     # prior sigma of log(bone / proportional bone)
-    iterations: int = 300
+    iterations: int = 150            # L-BFGS iterations of each of the two shape steps
 
 
 @dataclass(frozen=True)
@@ -76,7 +76,8 @@ class PoseConfig:
     sigma_velocity: float = 2.0        # m/s, +T landmark velocity scale
     sigma_acceleration: float = 15.0   # m/s^2, +T landmark acceleration scale
     sigma_angle_acceleration: float = 100.0  # rad/s^2, +T hinge acceleration scale
-    iterations: int = 400              # L-BFGS iterations per stage
+    iterations: int = 200              # L-BFGS iterations per pose stage
+    init_iterations: int = 100         # ... of the 3d-only inverse kinematics (variant S)
     hard_limits: bool = True           # joint limits as L-BFGS-B bounds
 
 

@@ -152,9 +152,9 @@ def _prepare(obs: Observations, cfg: KinematicConfig, height, mass, K_given, tim
     w = cfg.pose.weights
     params, _ = problem.run(params, ("root_rotvec", "angles"), weight_dict(
         world_landmarks=w.world_landmarks, pose_prior=w.pose_prior,
-        joint_limits=w.joint_limits), cfg.pose.iterations)
+        joint_limits=w.joint_limits), cfg.pose.init_iterations)
     params, _ = problem.run(params, ("root_pos",), weight_dict(reprojection=w.reprojection),
-                            cfg.pose.iterations)
+                            cfg.pose.init_iterations)
     ctx = _Context(obs=obs, cfg=cfg, ev=ev, K=K, focal_prior=focal_prior,
                    K_given=K_given is not None, shape=shape, surface=surface, height=height,
                    params=params, problem=problem, timings=timer.timings)

@@ -41,7 +41,7 @@ class Problem:
     hard_limits: bool = True
 
     def run(self, params: Params, free: tuple[str, ...], weights: dict, iterations: int,
-            tolerance: float = 1e-9) -> tuple[Params, dict[str, float]]:
+            tolerance: float = 1e-8) -> tuple[Params, dict[str, float]]:
         """Minimise the weighted objective over the free parameters; returns them and the
         final value of every term."""
         w = {k: jnp.asarray(v) for k, v in weights.items()}

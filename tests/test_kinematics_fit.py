@@ -1,0 +1,112 @@
+"""The kinematic fit end to end on synthetic clips: exact recovery from perfect observations,
+every variant on noisy ones, the cache, and bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_kinematics_fixtures import synthetic_clip
+
+from physpose.errors import PhysposeError
+from physpose.fk import fk_qpos
+from physpose.kinematics import KinematicConfig, fit_kinematics
+from physpose.kinematics.config import VARIANT_NAMES
+from physpose.kinematics.fit import fit_variants
+from physpose.metrics import transform_points
+
+
+def _camera_landmarks(fit) -> np.ndarray:
+    return transform_points(fit.T_world2cam, fit.landmarks)
+
+
+@pytest.fixture(scope="module")
+def perfect():
+    return synthetic_clip(frames=10)
+
+
+def test_recovers_known_pose_and_camera_from_perfect_landmarks(perfect):
+    fit = fit_kinematics(perfect.observations, KinematicConfig.preset("SO", use_cache=False),
+                         height=perfect.shape.height)
+    err = np.linalg.norm(_camera_landmarks(fit) - perfect.landmarks_cam, axis=-1)
+    assert err.mean() < 0.01 and np.percentile(err, 95) < 0.02, err.mean()
+    assert np.allclose(fit.camera_K, perfect.K)
+    assert np.abs(fit.shape.bones() - perfect.shape.bones()).max() < 0.01
+    # The body re-projects onto the detections to well under a pixel.
+    uv = _camera_landmarks(fit) @ fit.camera_K.T
+    px = np.linalg.norm(uv[..., :2] / uv[..., 2:] - perfect.observations.keypoints2d[..., :2],
+                        axis=-1)
+    assert px.mean() < 0.5
+
+
+def test_result_is_consistent_in_the_world_frame(perfect):
+    fit = fit_kinematics(perfect.observations, KinematicConfig.preset("SO+G", use_cache=False),
+                         height=perfect.shape.height)
+    joints, landmarks = fk_qpos(fit.shape.bones(), fit.qpos)
+    assert np.allclose(joints, fit.joints) and np.allclose(landmarks, fit.landmarks)
+    assert np.allclose(np.linalg.norm(fit.qpos[:, 3:7], axis=1), 1.0)
+    R = fit.T_world2cam[:3, :3]
+    assert np.allclose(R @ R.T, np.eye(3), atol=1e-9)
+    # The estimated floor is the true one (the true normal in camera axes, within 2 degrees).
+    n_true = perfect.T_world2cam[:3, :3] @ [0.0, 0.0, 1.0]
+    angle = np.degrees(np.arccos(np.clip(R @ [0.0, 0.0, 1.0] @ n_true, -1, 1)))
+    assert angle < 2.0, angle
+    # Origin under the first pelvis; the lowest sole sample touches the floor.
+    assert np.allclose(fit.qpos[0, :2], 0.0, atol=1e-6)
+    assert fit.ground_estimated and fit.variant == "SO+G"
+
+
+@pytest.fixture(scope="module")
+def noisy_fits():
+    clip = synthetic_clip(frames=16, noise_px=2.0, noise_3d=0.03, seed=1, with_K=False)
+    return clip, fit_variants(clip.observations, VARIANT_NAMES, KinematicConfig(use_cache=False))
+
+
+@pytest.mark.parametrize("variant", VARIANT_NAMES)
+def test_every_variant_runs(noisy_fits, variant):
+    clip, fits = noisy_fits
+    fit = fits[variant]
+    n = clip.observations.num_frames
+    assert fit.variant == variant
+    assert fit.qpos.shape == (n, 55) and fit.joints.shape == (n, 21, 3)
+    assert np.isfinite(fit.qpos).all() and np.isfinite(fit.landmarks).all()
+    assert fit.ground_estimated == ("G" in variant)
+    # Estimated intrinsics (none were given) and a sensible body.
+    assert fit.camera_K[0, 0] > 0 and 1.4 < fit.shape.height < 2.1
+    err = np.linalg.norm(_camera_landmarks(fit) - clip.landmarks_cam, axis=-1)
+    assert np.median(err) < 0.25, (variant, np.median(err))
+    assert {"shape", "init"} <= set(fit.timings)
+
+
+def test_temporal_term_smooths(noisy_fits):
+    _, fits = noisy_fits
+    acc = {v: np.abs(np.diff(fits[v].joints, 2, axis=0)).mean() for v in ("SO", "SO+T")}
+    assert acc["SO+T"] < 0.7 * acc["SO"], acc
+
+
+def test_cache_returns_the_same_fit(perfect, tmp_path, monkeypatch):
+    monkeypatch.setenv("PHYSPOSE_CACHE_DIR", str(tmp_path))
+    cfg = KinematicConfig.preset("S")
+    first = fit_kinematics(perfect.observations, cfg)
+    assert list((tmp_path / "kinematics").glob("*.npz"))
+    second = fit_kinematics(perfect.observations, cfg)
+    assert np.array_equal(first.qpos, second.qpos) and first.shape == second.shape
+    other = fit_kinematics(perfect.observations, cfg, height=1.6)  # a new key, a new fit
+    assert abs(other.shape.height - 1.6) < 1e-6
+
+
+def test_bad_input_is_reported(perfect):
+    obs = perfect.observations
+    with pytest.raises(PhysposeError, match="world landmarks"):
+        fit_kinematics(obs.replace(world_landmarks=None), KinematicConfig(use_cache=False))
+    blind = obs.keypoints2d.copy()
+    blind[..., 2] = 0.0
+    with pytest.raises(PhysposeError, match="no frame"):
+        fit_kinematics(obs.replace(keypoints2d=blind), KinematicConfig(use_cache=False))
+    with pytest.raises(PhysposeError, match="unknown kinematic variant"):
+        KinematicConfig.preset("SOG")
+    with pytest.raises(PhysposeError, match="need the pose optimisation"):
+        KinematicConfig(optimize_pose=False, ground=True)
+    with pytest.raises(PhysposeError, match="pinhole"):
+        fit_kinematics(obs, KinematicConfig(use_cache=False), camera_K=np.eye(2))
+    with pytest.raises(PhysposeError, match="height"):
+        fit_kinematics(obs, KinematicConfig(use_cache=False), height=7.0)

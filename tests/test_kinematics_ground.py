@@ -1,0 +1,70 @@
+"""The ground plane (+G) on a synthetic walk over a tilted floor, and the world frame it gives."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+from test_kinematics_fixtures import walking_qpos
+
+from physpose.fk import segment_frames
+from physpose.kinematics.camera import UP_LEVEL, plane_from_world, world_from_plane
+from physpose.kinematics.config import GroundConfig
+from physpose.kinematics.ground import estimate_plane, level_plane
+from physpose.kinematics.surface import centre_of_mass, place, surface_points
+from physpose.shape import BodyShape
+
+
+def _posed_points(shape: BodyShape, qpos: np.ndarray, R_world2cam: np.ndarray,
+                  t_world2cam: np.ndarray):
+    surface = surface_points(shape)
+    pos, rot = segment_frames(shape.bones(), qpos[:, :3], qpos[:, 3:7], qpos[:, 7:])
+    world = place(surface, pos, rot)
+    cam = world @ R_world2cam.T + t_world2cam
+    return surface, cam, centre_of_mass(shape, surface, cam)
+
+
+@pytest.mark.parametrize("tilt_deg, roll_deg", [(25.0, 0.0), (10.0, 8.0), (40.0, -5.0)])
+def test_tilted_floor_is_recovered(tilt_deg, roll_deg):
+    """A camera pitched down by tilt_deg (and rolled) sees a person walk on the floor: the
+    estimated plane is the floor in camera axes."""
+    shape = BodyShape.from_height(1.7)
+    q = walking_qpos(shape, 40, heading_deg=30.0)
+    # Camera 2.5 m up, 5 m away; R maps world to camera (OpenCV: x right, y down, z forward).
+    level = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # looking along +y
+    R = Rotation.from_euler("zx", [roll_deg, -tilt_deg], degrees=True).as_matrix() @ level
+    centre = np.array([0.5, -5.0, 2.5])
+    surface, points, com = _posed_points(shape, q, R, -R @ centre)
+    plane, _ = estimate_plane(points, surface.left_foot, surface.right_foot, com, GroundConfig())
+    n_true = R @ np.array([0.0, 0.0, 1.0])
+    angle = np.degrees(np.arccos(np.clip(plane[:3] @ n_true, -1.0, 1.0)))
+    assert angle < 1.5, angle
+    assert abs(plane[3] - centre[2]) < 0.05, plane[3]  # camera height above the floor
+
+
+def test_level_guess_puts_the_feet_on_the_floor():
+    shape = BodyShape.from_height(1.7)
+    q = walking_qpos(shape, 20)
+    level = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    surface, points, _ = _posed_points(shape, q, level, -level @ np.array([0.0, -4.0, 1.2]))
+    plane = level_plane(points, surface.left_foot | surface.right_foot, 0.0)
+    assert np.allclose(plane[:3], UP_LEVEL)
+    heights = points[:, surface.left_foot | surface.right_foot] @ plane[:3] + plane[3]
+    assert heights.min() == pytest.approx(0.0, abs=1e-9)
+    assert plane[3] == pytest.approx(1.2, abs=0.03)
+
+
+def test_world_frame_of_a_plane():
+    n = Rotation.from_euler("x", 20, degrees=True).apply(UP_LEVEL)
+    origin = np.array([0.4, -0.5, 5.0])  # above the floor, which the axis meets at 5.3 m
+    T = world_from_plane(n, 1.8, origin)
+    R = T[:3, :3]
+    assert np.allclose(R @ R.T, np.eye(3)) and np.linalg.det(R) == pytest.approx(1.0)
+    n2, d2 = plane_from_world(T)
+    assert np.allclose(n2, n) and d2 == pytest.approx(1.8)
+    # The origin point lies above the world origin; the camera looks along world +x.
+    T_inv = np.linalg.inv(T)
+    o_world = T_inv[:3, :3] @ origin + T_inv[:3, 3]
+    assert np.allclose(o_world[:2], 0.0) and o_world[2] > 0
+    forward_world = T_inv[:3, :3] @ np.array([0.0, 0.0, 1.0])
+    assert forward_world[0] > 0.9 and abs(forward_world[1]) < 1e-9
