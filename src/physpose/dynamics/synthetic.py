@@ -16,6 +16,8 @@ import numpy as np
 from physpose.body import Body, standing_qpos
 from physpose.dynamics.objective import project
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
+from physpose.joints import LANDMARK_INDEX
+from physpose.metrics import transform_points
 from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
 from physpose.skeleton import DOF_NAMES, NV
@@ -81,6 +83,8 @@ def simulated_clip(body: Body, kind: str = "step", seconds: float = 2.0, fps: fl
     K, T = virtual_camera()
     landmarks = samples.landmarks[0]
     uv = project(landmarks, K, T)
+    cam = transform_points(T, landmarks)
+    hips = 0.5 * (cam[:, LANDMARK_INDEX["left_hip"]] + cam[:, LANDMARK_INDEX["right_hip"]])
     keypoints = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
     fit = KinematicFit(fps=fps, shape=body.shape, qpos=samples.qpos[0], joints=samples.joints[0],
                        landmarks=landmarks, camera_K=K, T_world2cam=T, variant="simulated",
@@ -88,5 +92,6 @@ def simulated_clip(body: Body, kind: str = "step", seconds: float = 2.0, fps: fl
     obs = Observations(source=f"simulated:{kind}", fps=fps, image_size=IMAGE_SIZE,
                        timestamps=frames / fps, keypoints2d=keypoints,
                        detected=np.ones(len(frames), dtype=bool),
-                       interpolated=np.zeros(len(frames), dtype=bool), camera_K=K)
+                       interpolated=np.zeros(len(frames), dtype=bool),
+                       world_landmarks=cam - hips[:, None], camera_K=K)
     return fit, obs, targets

@@ -1,0 +1,64 @@
+"""The composed pipeline: config presets, the reconstruct CLI's arguments and errors, and one
+end-to-end run on simulated observations (slow)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from physpose.body import build_body
+from physpose.cli import main
+from physpose.dynamics import PRESETS
+from physpose.dynamics.synthetic import simulated_clip
+from physpose.errors import PhysposeError
+from physpose.pipeline import CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig, reconstruct
+from physpose.reconstruction import Reconstruction
+from physpose.shape import BodyShape
+
+
+def test_presets_compose_the_dynamics_presets():
+    assert PipelineConfig.preset("fast") == PipelineConfig()
+    paper = PipelineConfig.preset("paper")
+    assert paper.dynamics == PRESETS["paper"] and paper.kinematics.variant == "SO+GT"
+    assert json.loads(json.dumps(paper.to_json()))["dynamics"]["iterations"] == 2000
+    with pytest.raises(PhysposeError, match="unknown preset"):
+        PipelineConfig.preset("slow")
+
+
+def test_reconstruct_cli_refuses_a_missing_video(tmp_path, capsys):
+    code = main(["reconstruct", str(tmp_path / "none.mp4"), "--out", str(tmp_path / "out")])
+    assert code == 2
+    assert "none.mp4" in capsys.readouterr().err
+
+
+def test_reconstruct_cli_refuses_a_file_as_output_folder(tmp_path, capsys):
+    body = build_body(BodyShape.from_height(1.75))
+    _, obs, _ = simulated_clip(body, "stand", seconds=0.4)
+    keypoints = obs.save(tmp_path / "obs.npz")
+    (tmp_path / "file").write_text("x")
+    code = main(["reconstruct", str(keypoints), "--out", str(tmp_path / "file")])
+    assert code == 2 and "not a folder" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_reconstruct_writes_the_contract(tmp_path):
+    body = build_body(BodyShape.from_height(1.75))
+    _, obs, _ = simulated_clip(body, "shift", seconds=1.2)
+    cfg = PipelineConfig.preset("fast")
+    recon = reconstruct(obs, tmp_path, cfg, height=1.75, progress=False)
+    loaded = Reconstruction.load(tmp_path / RECONSTRUCTION_FILE)
+    t = obs.num_frames
+    assert loaded.has_physics and loaded.joints_physics.shape == (t, 21, 3)
+    assert loaded.qpos_physics.shape == (t, 55) and loaded.landmarks_physics.shape == (t, 33, 3)
+    assert loaded.body_mjcf and "<mujoco" in loaded.body_mjcf
+    assert loaded.landmarks_kinematic.shape == (t, 33, 3)
+    assert set(loaded.meta["timings_s"]) == {"observe", "kinematics", "body", "dynamics"}
+    resolved = json.loads((tmp_path / CONFIG_FILE).read_text())
+    assert resolved["config"]["dynamics"]["iterations"] == cfg.dynamics.iterations
+    assert any((tmp_path / "dynamics_windows").iterdir())
+    # The simulated body stays near the kinematic estimate and on its feet.
+    gap = np.linalg.norm(recon.joints_physics - recon.joints_kinematic, axis=-1).mean()
+    assert gap < 0.1
+    assert recon.qpos_physics[:, 2].min() > 0.5 * recon.qpos_kinematic[:, 2].min()
