@@ -69,12 +69,12 @@ class PoseConfig:
     sigma_2d: float = 0.025            # m at the person's depth (~5 px at 1080p, 5 m)
     sigma_3d: float = 0.06             # m, MediaPipe world landmarks, lateral axes
     depth_sigma_ratio: float = 3.0     # MediaPipe's depth is far worse than its lateral axes
-    robust_c: float = 3.0              # Geman-McClure: residuals beyond ~c sigma saturate
+    robust_c: float = 5.0              # Geman-McClure: residuals beyond ~c sigma saturate
     min_confidence: float = 0.1        # landmarks below this confidence are ignored
     ray_aligned_world: bool = True     # MediaPipe's world landmarks face the ray to the hips
     depth_scale_log_sigma: float = 0.3  # prior of the per-clip depth scale of MediaPipe's 3d
     sigma_velocity: float = 2.0        # m/s, +T landmark velocity scale
-    sigma_acceleration: float = 15.0   # m/s^2, +T landmark acceleration scale
+    sigma_acceleration: float = 60.0   # m/s^2, +T landmark acceleration scale
     sigma_angle_acceleration: float = 100.0  # rad/s^2, +T hinge acceleration scale
     iterations: int = 200              # L-BFGS iterations per pose stage
     init_iterations: int = 100         # ... of the 3d-only inverse kinematics (variant S)
@@ -112,7 +112,8 @@ class KinematicConfig:
     pose: PoseConfig = PoseConfig()
     ground_plane: GroundConfig = GroundConfig()
     fix_swaps: bool = True            # undo left/right limb swaps by temporal continuity
-    use_cache: bool = True
+    use_cache: bool = True            # cache results (physpose.cache) by input and config
+    compile_cache: bool = True        # keep JAX's compiled objectives on disk (cache_dir/jax)
 
     def __post_init__(self) -> None:
         if (self.ground or self.temporal) and not self.optimize_pose:

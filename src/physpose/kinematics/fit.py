@@ -22,11 +22,13 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import jax
 import numpy as np
 from jax.experimental import enable_x64
 from scipy.spatial.transform import Rotation
 
 from physpose.cache import Cache, stage_key
+from physpose.paths import cache_dir
 from physpose.fk import fk_qpos, segment_frames
 from physpose.kinematics import camera as cam
 from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
@@ -52,6 +54,14 @@ def _quiet(_: str) -> None:
     pass
 
 
+def enable_compilation_cache() -> None:
+    """Keep JAX's compiled objectives on disk (paths.cache_dir()/jax) so a new process does
+    not compile them again, unless the user configured a JAX compilation cache already."""
+    if not jax.config.jax_compilation_cache_dir:
+        jax.config.update("jax_compilation_cache_dir", str(cache_dir() / "jax"))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+
+
 def stderr_log(message: str) -> None:
     print(f"kinematics: {message}", file=sys.stderr, flush=True)
 
@@ -69,7 +79,7 @@ def fit_kinematics(observations: Observations, config: KinematicConfig = Kinemat
     if height is not None:
         BodyShape.from_height(height, mass)  # range checks with a clear message
     key = stage_key("kinematics", version=KINEMATICS_VERSION,
-                    config=dataclasses.replace(config, use_cache=True),
+                    config=dataclasses.replace(config, use_cache=True, compile_cache=True),
                     extra={"observations": _observation_arrays(observations), "height": height,
                            "mass": mass, "camera_K": None if K is None else np.asarray(K, float)})
     cache = Cache("kinematics")
@@ -188,6 +198,8 @@ def fit_variants(obs: Observations, variants: tuple[str, ...], cfg: KinematicCon
         KinematicConfig.preset(v)  # unknown names fail early
     K = camera_K if camera_K is not None else obs.camera_K
     timer = _Timer(log)
+    if cfg.compile_cache:
+        enable_compilation_cache()
     with enable_x64():
         ctx = _prepare(obs, cfg, height, mass, K, timer)
         focal = not ctx.K_given and cfg.camera.refine_focal

@@ -22,6 +22,7 @@ import numpy as np
 
 from physpose.kinematics.camera import UP_LEVEL
 from physpose.kinematics.config import GroundConfig
+from physpose.kinematics.evidence import pad, padded_length
 from physpose.kinematics.losses import ground_term
 from physpose.kinematics.optim import minimize
 
@@ -47,17 +48,18 @@ def _normal(tilt, n0, e1, e2):
 
 
 _SUPPORT_BAND = 0.03  # m: surface points this close to the lowest one form the support
+_MAX_ROUNDS = 5       # restarts of the plane fit from its own result
 
 
-def _plane_loss(p: PlaneParams, n0, e1, e2, points, left, right, balance, roll_sigma,
+def _plane_loss(p: PlaneParams, n0, e1, e2, points, weight, left, right, balance, roll_sigma,
                 balance_sigma, *, k, delta, body_weight):
     n = _normal(p.tilt, n0, e1, e2)
     dist = points @ n + p.offset                                   # (T, P)
     per = (ground_term(dist[:, left], k, delta) + ground_term(dist[:, right], k, delta)
            + body_weight * ground_term(dist, k, delta)) / _GP_SCALE
     roll = jnp.arctan2(n[0], -n[1])
-    lean = jnp.mean(2.0 * (1.0 - balance @ n)) / balance_sigma ** 2
-    return jnp.mean(per) + (roll / roll_sigma) ** 2 + lean
+    lean = 2.0 * (1.0 - balance @ n) / balance_sigma ** 2
+    return jnp.sum(weight * (per + lean)) / jnp.sum(weight) + (roll / roll_sigma) ** 2
 
 
 _plane_value_and_grad = jax.jit(jax.value_and_grad(_plane_loss),
@@ -103,12 +105,17 @@ def estimate_plane(points: np.ndarray, left: np.ndarray, right: np.ndarray, com:
     starts.append(_lowest_foot_normal(points, feet, starts[1]))
     best = None
     for n0 in starts:
-        n = n0
-        for _ in range(2):  # the support (hence the balance directions) depends on the normal
-            value, n, d = _fit_plane(points, left, right,
-                                     balance_directions(points, com, n), n, cfg)
-        if best is None or value < best[0]:
-            best = (value, n, d)
+        n, value = n0, np.inf
+        # The support (hence the balance directions) depends on the normal, and L-BFGS stops
+        # at the kinks of the k-smallest selection: restart from each result while it improves.
+        for _ in range(_MAX_ROUNDS):
+            v, n_new, d = _fit_plane(points, left, right, balance_directions(points, com, n),
+                                     n, cfg)
+            if v > value - 1e-6:
+                break
+            value, n = v, n_new
+            if best is None or value < best[0]:
+                best = (value, n, d)
     value, n, d = best
     return np.concatenate([n, [d]]), value
 
@@ -117,8 +124,12 @@ def _fit_plane(points, left, right, balance, n0, cfg: GroundConfig):
     e1, e2 = _basis(n0)
     feet = np.flatnonzero(left | right)
     d0 = -float(np.percentile(np.min(points[:, feet] @ n0, axis=1), 10.0))
-    args = (n0, e1, e2, points, np.flatnonzero(left), np.flatnonzero(right), balance,
-            np.radians(cfg.roll_sigma_deg), np.radians(cfg.balance_sigma_deg))
+    length = padded_length(len(points))  # a few array sizes: compiled code is reused
+    weight = np.zeros(length)
+    weight[:len(points)] = 1.0
+    args = (n0, e1, e2, pad(points, length), weight, np.flatnonzero(left),
+            np.flatnonzero(right), pad(balance, length), np.radians(cfg.roll_sigma_deg),
+            np.radians(cfg.balance_sigma_deg))
 
     def value_and_grad(p: PlaneParams):
         return _plane_value_and_grad(p, *args, k=cfg.k, delta=cfg.delta,
