@@ -11,6 +11,7 @@ import pytest
 from physpose.body import build_body
 from physpose.dynamics import ABLATIONS, PRESETS, DynamicsConfig, ablated, optimize_dynamics
 from physpose.dynamics import checkpoint
+from physpose.dynamics.optimize import _cma, _window_seed
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.dynamics.windows import blend_weights, plan_windows
 from physpose.errors import PhysposeError
@@ -57,8 +58,21 @@ def test_same_seed_same_result_and_another_seed_differs(clip):
     a = run(clip, checkpoints=False)
     b = run(clip, checkpoints=False)
     np.testing.assert_array_equal(a.qpos, b.qpos)
-    c = run(clip, dataclasses.replace(TINY, seed=7), checkpoints=False)
-    assert not np.array_equal(a.ctrl, c.ctrl)
+    # Every window draws its own reproducible samples from (seed, window index).
+    x0 = np.zeros(10)
+    draw = lambda seed, w: np.array(_cma(x0, TINY, _window_seed(seed, w)).ask())  # noqa: E731
+    np.testing.assert_array_equal(draw(0, 1), draw(0, 1))
+    assert not np.array_equal(draw(0, 1), draw(0, 2))
+    assert not np.array_equal(draw(0, 1), draw(7, 1))
+
+
+def test_searching_legs_and_trunk_keeps_the_other_targets(clip):
+    res = run(clip, dataclasses.replace(TINY, search="legs_trunk"), checkpoints=False)
+    init = run(clip, dataclasses.replace(TINY, iterations=0), checkpoints=False)
+    from physpose.dynamics.optimize import searched_dofs
+    kept = np.setdiff1d(np.arange(48), searched_dofs("legs_trunk"))
+    assert len(kept) == 24
+    np.testing.assert_allclose(res.ctrl[:, kept], init.ctrl[:, kept], atol=1e-12)
 
 
 @pytest.mark.parametrize("independent", [False, True])
@@ -111,6 +125,8 @@ def test_presets_and_ablations():
         ablated(PRESETS["fast"], "nothing")
     with pytest.raises(PhysposeError):
         DynamicsConfig(overlap=2.0)
+    with pytest.raises(PhysposeError):
+        DynamicsConfig(search="arms")
 
 
 def test_mismatched_inputs_are_refused(clip):
@@ -119,7 +135,8 @@ def test_mismatched_inputs_are_refused(clip):
         optimize_dynamics(body, fit, obs.replace(keypoints2d=obs.keypoints2d[:-1],
                                                  timestamps=obs.timestamps[:-1],
                                                  detected=obs.detected[:-1],
-                                                 interpolated=obs.interpolated[:-1]),
+                                                 interpolated=obs.interpolated[:-1],
+                                                 world_landmarks=obs.world_landmarks[:-1]),
                           TINY, checkpoints=False, progress=False)
     bad = dataclasses.replace(fit, qpos=np.where(np.arange(55) == 9, np.nan, fit.qpos))
     with pytest.raises(PhysposeError, match="not finite"):

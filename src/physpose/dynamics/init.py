@@ -202,3 +202,9 @@ def ground_state(model: mujoco.MjModel, qpos: np.ndarray, snap: float) -> np.nda
     if low < snap:
         out[2] -= low
     return out
+
+
+def ground_motion(model: mujoco.MjModel, qpos: np.ndarray, snap: float) -> np.ndarray:
+    """qpos (T, 55) with each frame shifted vertically as `ground_state` does: out of the floor,
+    or down onto it when hovering less than snap (m); other frames (jumps) are unchanged."""
+    return np.stack([ground_state(model, q, snap) for q in qpos])

@@ -31,8 +31,9 @@ from tqdm import tqdm
 
 from physpose.body import Body
 from physpose.dynamics import checkpoint
-from physpose.dynamics.init import (Reference, ground_state, initial_coefficients,
-                                    inverse_dynamics_targets, smooth_reference)
+from physpose.dynamics.init import (Reference, ground_motion, ground_state,
+                                    initial_coefficients, inverse_dynamics_targets,
+                                    smooth_reference)
 from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, make_reference)
 from physpose.dynamics.result import PhysicsResult
 from physpose.dynamics.rollout import SimModel, Simulator, Trajectories, make_state, sim_model
@@ -42,9 +43,10 @@ from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, pla
 from physpose.errors import PhysposeError
 from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
-from physpose.skeleton import NQ
+from physpose.skeleton import DOF_NAMES, NQ
 
 MIN_FRAMES = 3
+SEARCH_SETS = ("all", "legs_trunk")  # hinges whose targets CMA-ES varies (see searched_dofs)
 
 
 @dataclass(frozen=True)
@@ -59,7 +61,11 @@ class DynamicsConfig:
     (sep-CMA) instead of full. max_root_distance: m, a sample whose root strays further from
     the kinematic root is invalid; max_penetration: m below the floor. contact_height: m, sole
     points this close to the floor may push in the initial inverse dynamics; ground_snap: m,
-    an initial state hovering less than this is put down on the floor. seed: CMA-ES seed.
+    an initial state hovering less than this is put down on the floor; ground_reference: do
+    the same to every frame of the estimate before it gives the initial targets and the COM
+    targets (a foot inside the floor would stub it; a sunken body asks for bent knees).
+    search: "all" hinges, or "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
+    needs; arms, neck and head keep their inverse-dynamics targets). seed: CMA-ES seed.
     nthread: rollout threads (does not change results).
     """
 
@@ -78,6 +84,8 @@ class DynamicsConfig:
     max_penetration: float = 0.1
     contact_height: float = 0.03
     ground_snap: float = 0.03
+    ground_reference: bool = True
+    search: str = "all"
     seed: int = 0
     nthread: int = 2
 
@@ -95,6 +103,9 @@ class DynamicsConfig:
             if getattr(self, name) < 1:
                 raise PhysposeError(f"dynamics config {name} must be >= 1",
                                     remedy="use a preset (fast or paper)")
+        if self.search not in SEARCH_SETS:
+            raise PhysposeError(f"dynamics search {self.search!r} is unknown",
+                                remedy=f"use one of {SEARCH_SETS}")
         if self.iterations < 0:
             raise PhysposeError("dynamics iterations must be >= 0", remedy="use e.g. 20")
 
@@ -161,14 +172,16 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
     windows = plan_windows(kin.num_frames, fps, dt, cfg.window, cfg.overlap,
                            anchor_last=cfg.independent)
     num_steps = int(np.ceil(step_position(kin.num_frames - 1, fps, dt) - 1e-9))
-    reference = smooth_reference(kin.qpos, fps, dt, num_steps, cfg.reference_knot_spacing)
+    grounded = ground_motion(sim.model, kin.qpos, cfg.ground_snap) if cfg.ground_reference \
+        else kin.qpos
+    reference = smooth_reference(grounded, fps, dt, num_steps, cfg.reference_knot_spacing)
     targets = inverse_dynamics_targets(sim.model, reference, sim.body.foot_geom_ids,
                                        sim.body.scene.ground_friction, cfg.contact_height)
     step_times = np.arange(num_steps) * dt
     grid = KnotGrid(cfg.knot_spacing, num_steps * dt)
     coefs0 = initial_coefficients(grid, step_times, targets[:num_steps])
     frame_steps = np.round(step_position(np.arange(kin.num_frames), fps, dt)).astype(int)
-    objective = make_reference(sim.model, kin.qpos, obs.keypoints2d, kin.camera_K,
+    objective = make_reference(sim.model, grounded, obs.keypoints2d, kin.camera_K,
                                kin.T_world2cam, fps, smooth_qpos=reference.qpos[frame_steps])
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
                   objective=objective, step_times=step_times)
@@ -180,17 +193,25 @@ def _kinematic_state(setup: _Setup, step: int, snap: float) -> np.ndarray:
     return make_state(setup.sim, qpos, ref.qvel[step], time=step * setup.sim.dt)
 
 
+def searched_dofs(search: str) -> np.ndarray:
+    """Indices (DOF_NAMES) of the hinges whose targets the search varies."""
+    if search == "all":
+        return np.arange(len(DOF_NAMES))
+    return np.array([k for k, n in enumerate(DOF_NAMES) if n.split("_")[0] in ("spine", "thorax")
+                     or n.split("_")[1] in ("hip", "knee", "ankle")])
+
+
 def _problem(setup: _Setup, win: Window, coefs: np.ndarray, state0: np.ndarray,
-             first_free: int, history: np.ndarray | None) -> WindowProblem:
+             first_free: int, history: np.ndarray | None, cfg: DynamicsConfig) -> WindowProblem:
     active = setup.grid.active(win.start_step * setup.sim.dt, win.end_step * setup.sim.dt)
     free = slice(max(active.start, first_free), active.stop)
     basis = setup.grid.basis(setup.step_times[win.start_step:win.end_step])
     mask = np.zeros(basis.shape[1], dtype=bool)
     mask[free] = True
     positions = step_position(win.frames, setup.objective.fps, setup.sim.dt) - win.start_step
-    return WindowProblem(window=win, state0=state0, free=free, basis=basis[:, mask],
-                         fixed_ctrl=basis[:, ~mask] @ coefs[~mask], x0=coefs[free].copy(),
-                         positions=positions, history=history)
+    return WindowProblem(window=win, state0=state0, free=free, dofs=searched_dofs(cfg.search),
+                         basis=basis[:, mask], fixed_ctrl=basis[:, ~mask] @ coefs[~mask],
+                         start=coefs[free].copy(), positions=positions, history=history)
 
 
 def _cma(x0: np.ndarray, cfg: DynamicsConfig, seed: int) -> cma.CMAEvolutionStrategy:
@@ -334,12 +355,12 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             joints_so_far = np.concatenate(parts["joints"]) if parts["joints"] else np.zeros((0,))
             history = joints_so_far[max(0, win.first - 2):win.first] if w > 0 else None
             first_free = setup.grid.started_before(win.start_step * setup.sim.dt) if w else 0
-            problem = _problem(setup, win, coefs, state, first_free, history)
+            problem = _problem(setup, win, coefs, state, first_free, history, cfg)
             search = _Search([problem], simulator, setup, cfg, timing)
             (best,), (initial,) = search.run([_window_seed(cfg.seed, w)],
                                              f"dynamics window {w + 1}/{len(wins)}", progress)
             coefs = coefs.copy()
-            coefs[problem.free] = best.x.reshape(problem.x0.shape)
+            coefs[problem.free] = problem.coefficients(best.x[None])[0]
             ctrl = problem.ctrl(best.x[None])[0][:step_end - win.start_step]
             out = _frame_outputs(setup, best, win, np.arange(win.first, commit_end))
             next_state = best.states[step_end - win.start_step]
@@ -370,8 +391,8 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
         group = todo[g:g + cfg.parallel_windows]
         start = time.perf_counter()
         problems = [_problem(setup, wins[w], setup.coefs0,
-                             _kinematic_state(setup, wins[w].start_step, cfg.ground_snap), 0, None)
-                    for w in group]
+                             _kinematic_state(setup, wins[w].start_step, cfg.ground_snap), 0, None,
+                             cfg) for w in group]
         search = _Search(problems, simulator, setup, cfg, timing)
         label = f"dynamics windows {group[0] + 1}-{group[-1] + 1}/{len(wins)}"
         bests, initials = search.run([_window_seed(cfg.seed, w) for w in group], label, progress)

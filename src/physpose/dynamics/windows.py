@@ -79,16 +79,27 @@ class WindowProblem:
     window: Window
     state0: np.ndarray
     free: slice
+    dofs: np.ndarray
     basis: np.ndarray
     fixed_ctrl: np.ndarray
-    x0: np.ndarray
+    start: np.ndarray
     positions: np.ndarray
     history: np.ndarray | None
 
+    @property
+    def x0(self) -> np.ndarray:
+        return self.start[:, self.dofs]
+
+    def coefficients(self, x: np.ndarray) -> np.ndarray:
+        """Free coefficients (B, nfree, 48) for flat search vectors x (B, nfree * ndofs)."""
+        x = np.asarray(x, dtype=float).reshape(len(x), len(self.start), len(self.dofs))
+        coefs = np.repeat(self.start[None], len(x), axis=0)
+        coefs[:, :, self.dofs] = x
+        return coefs
+
     def ctrl(self, x: np.ndarray) -> np.ndarray:
-        """Servo targets (B, S, 48) for flat coefficient vectors x (B, nfree * 48)."""
-        coefs = np.asarray(x, dtype=float).reshape(len(x), *self.x0.shape)
-        return self.fixed_ctrl + np.matmul(self.basis, coefs)
+        """Servo targets (B, S, 48) for flat search vectors x (B, nfree * ndofs)."""
+        return self.fixed_ctrl + np.matmul(self.basis, self.coefficients(x))
 
 
 @dataclass(frozen=True, eq=False)
