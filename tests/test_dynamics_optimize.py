@@ -75,6 +75,15 @@ def test_searching_legs_and_trunk_keeps_the_other_targets(clip):
     np.testing.assert_allclose(res.ctrl[:, kept], init.ctrl[:, kept], atol=1e-12)
 
 
+def test_tracking_start_is_a_second_start_guess(clip):
+    res = run(clip, dataclasses.replace(TINY, tracking_start=True), checkpoints=False)
+    plain = run(clip, TINY, checkpoints=False)
+    for w, p in zip(res.windows, plain.windows):
+        assert w["start"] in ("inverse_dynamics", "tracking")
+        assert w["evaluations"] == p["evaluations"] + 1
+    assert all(w["start"] == "inverse_dynamics" for w in plain.windows)
+
+
 @pytest.mark.parametrize("independent", [False, True])
 def test_interrupted_run_resumes_to_the_uninterrupted_result(clip, tmp_path, monkeypatch,
                                                              independent):

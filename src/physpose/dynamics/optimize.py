@@ -37,7 +37,8 @@ from physpose.dynamics.init import (Reference, ground_motion, ground_state,
 from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, make_reference)
 from physpose.dynamics.result import PhysicsResult
 from physpose.dynamics.rollout import SimModel, Simulator, Trajectories, make_state, sim_model
-from physpose.dynamics.spline import KnotGrid
+from physpose.dynamics.spline import KnotGrid, fit_coefficients
+from physpose.dynamics.tracking import track
 from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
                                        ranked_fitness, score, step_position)
 from physpose.errors import PhysposeError
@@ -64,6 +65,8 @@ class DynamicsConfig:
     an initial state hovering less than this is put down on the floor; ground_reference: do
     the same to every frame of the estimate before it gives the initial targets and the COM
     targets (a foot inside the floor would stub it; a sunken body asks for bent knees).
+    tracking_start: also simulate each window once with a balance feedback (tracking.py) and
+    start CMA-ES from its fitted targets when they score better than the inverse-dynamics ones.
     search: "all" hinges, or "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
     needs; arms, neck and head keep their inverse-dynamics targets). seed: CMA-ES seed.
     nthread: rollout threads (does not change results).
@@ -85,6 +88,7 @@ class DynamicsConfig:
     contact_height: float = 0.03
     ground_snap: float = 0.03
     ground_reference: bool = True
+    tracking_start: bool = False
     search: str = "all"
     seed: int = 0
     nthread: int = 2
@@ -209,9 +213,16 @@ def _problem(setup: _Setup, win: Window, coefs: np.ndarray, state0: np.ndarray,
     mask = np.zeros(basis.shape[1], dtype=bool)
     mask[free] = True
     positions = step_position(win.frames, setup.objective.fps, setup.sim.dt) - win.start_step
-    return WindowProblem(window=win, state0=state0, free=free, dofs=searched_dofs(cfg.search),
-                         basis=basis[:, mask], fixed_ctrl=basis[:, ~mask] @ coefs[~mask],
-                         start=coefs[free].copy(), positions=positions, history=history)
+    problem = WindowProblem(window=win, state0=state0, free=free, dofs=searched_dofs(cfg.search),
+                            basis=basis[:, mask], fixed_ctrl=basis[:, ~mask] @ coefs[~mask],
+                            start=coefs[free].copy(), positions=positions, history=history)
+    if not cfg.tracking_start:
+        return problem
+    feedforward = problem.ctrl(problem.x0.reshape(1, -1))[0]
+    applied = track(setup.sim, state0, setup.reference, win.start_step, feedforward)
+    fitted = fit_coefficients(problem.basis, applied - problem.fixed_ctrl, ridge=1e-6,
+                              prior=problem.start)
+    return dataclasses.replace(problem, alternatives=(fitted[:, problem.dofs],))
 
 
 def _cma(x0: np.ndarray, cfg: DynamicsConfig, seed: int) -> cma.CMAEvolutionStrategy:
@@ -293,14 +304,17 @@ class _Search:
         the mean is the smoothest candidate and often the best.
         """
         frames = [len(p.positions) for p in self.problems]
-        x0 = [p.x0.reshape(1, -1) for p in self.problems]
+        starts = [np.stack([p.x0.ravel()] + [a.ravel() for a in p.alternatives])
+                  for p in self.problems]
         best: list[_Best | None] = [None] * len(self.problems)
         initial = []
-        for i, (x, (s, part)) in enumerate(zip(x0, self._evaluate(x0))):
+        for i, (x, (s, part)) in enumerate(zip(starts, self._evaluate(starts))):
             best[i] = self._update(None, x, s, part, ranked_fitness(s, frames[i]))
             initial.append({"loss": float(s.total[0]), "valid": bool(np.isfinite(s.total[0])),
-                            "terms": {n: float(v[0]) for n, v in s.terms.items()}})
-        strategies = [_cma(p.x0, self.cfg, seed) for p, seed in zip(self.problems, seeds)]
+                            "terms": {n: float(v[0]) for n, v in s.terms.items()},
+                            "start": int(np.argmin(ranked_fitness(s, frames[i])))})
+        # CMA-ES starts from the better start guess (inverse dynamics, or tracking).
+        strategies = [_cma(b.x, self.cfg, seed) for b, seed in zip(best, seeds)]
         bar = tqdm(total=self.cfg.iterations, desc=label, disable=not progress, file=sys.stderr,
                    leave=False, dynamic_ncols=True)
         with warnings.catch_warnings():
@@ -333,6 +347,7 @@ def _record(win: Window, best: _Best, initial: dict, evaluations: int, seconds: 
             "steps": [win.start_step, win.end_step], "evaluations": evaluations,
             "loss_initial": initial["loss"], "terms_initial": initial["terms"],
             "initial_valid": initial["valid"], "loss_final": best.loss, "valid": best.valid,
+            "start": ("inverse_dynamics", "tracking")[initial["start"]],
             "terms_final": best.terms, "weights": weights.as_dict(), "seconds": seconds}
 
 

@@ -85,6 +85,7 @@ class WindowProblem:
     start: np.ndarray
     positions: np.ndarray
     history: np.ndarray | None
+    alternatives: tuple[np.ndarray, ...] = ()  # other start guesses (nfree, ndofs)
 
     @property
     def x0(self) -> np.ndarray:
