@@ -174,22 +174,20 @@ def initial_coefficients(grid: KnotGrid, step_times: np.ndarray, targets: np.nda
     return np.clip(coefs, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])
 
 
+def geom_lowest(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> float:
+    """Lowest z (m) of a box, capsule or sphere geom, after mj_kinematics."""
+    size, pos = model.geom_size[geom], data.geom_xpos[geom]
+    rot = data.geom_xmat[geom].reshape(3, 3)
+    if model.geom_type[geom] == mujoco.mjtGeom.mjGEOM_BOX:
+        return float(pos[2] - np.abs(rot[2]) @ size)
+    if model.geom_type[geom] == mujoco.mjtGeom.mjGEOM_CAPSULE:
+        return float(pos[2] - abs(rot[2, 2]) * size[1] - size[0])
+    return float(pos[2] - size[0])
+
+
 def lowest_point(model: mujoco.MjModel, data: mujoco.MjData) -> float:
-    """Lowest z (m) of any body geom after mj_kinematics (capsules, spheres, boxes)."""
-    lowest = np.inf
-    for g in range(model.ngeom):
-        if model.geom_bodyid[g] == 0:
-            continue
-        size, pos = model.geom_size[g], data.geom_xpos[g]
-        rot = data.geom_xmat[g].reshape(3, 3)
-        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
-            z = pos[2] - np.abs(rot[2]) @ size
-        elif model.geom_type[g] == mujoco.mjtGeom.mjGEOM_CAPSULE:
-            z = pos[2] - abs(rot[2, 2]) * size[1] - size[0]
-        else:
-            z = pos[2] - size[0]
-        lowest = min(lowest, float(z))
-    return lowest
+    """Lowest z (m) of any body geom after mj_kinematics."""
+    return min(geom_lowest(model, data, g) for g in range(model.ngeom) if model.geom_bodyid[g])
 
 
 def ground_state(model: mujoco.MjModel, qpos: np.ndarray, snap: float) -> np.ndarray:

@@ -31,7 +31,7 @@ from tqdm import tqdm
 
 from physpose.body import Body
 from physpose.dynamics import checkpoint
-from physpose.dynamics.init import (Reference, ground_motion, ground_state,
+from physpose.dynamics.init import (Reference, geom_lowest, ground_motion, ground_state,
                                     initial_coefficients, inverse_dynamics_targets,
                                     smooth_reference)
 from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, make_reference)
@@ -449,14 +449,10 @@ def foot_heights(model: mujoco.MjModel, qpos: np.ndarray, foot_geoms: dict[str, 
     """(T, 2) lowest z (m) of the left and right foot boxes for qpos (T, 55)."""
     data = mujoco.MjData(model)
     out = np.empty((len(qpos), 2))
-    corners = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
     for t, q in enumerate(qpos):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
-        for i, side in enumerate(("l", "r")):
-            g = foot_geoms[side]
-            pts = data.geom_xpos[g] + (corners * model.geom_size[g]) @ data.geom_xmat[g].reshape(3, 3).T
-            out[t, i] = pts[:, 2].min()
+        out[t] = [geom_lowest(model, data, foot_geoms[side]) for side in ("l", "r")]
     return out
 
 

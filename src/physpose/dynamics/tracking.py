@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from physpose.dynamics.init import Reference
+from physpose.dynamics.init import Reference, geom_lowest
 from physpose.dynamics.rollout import SimModel
 from physpose.skeleton import DOF_NAMES
 
@@ -93,7 +93,7 @@ def track(sim: SimModel, state0: np.ndarray, ref: Reference, start_step: int,
         R_ref = R_ref.reshape(3, 3)
         torque = kp_r * _orientation_error(R_ref, R) + kd_r * (R_ref @ ref.qvel[n, 3:6]
                                                               - R @ data.qvel[3:6])
-        stance = [s for s, g in body.foot_geom_ids.items() if _lowest(m, data, g)
+        stance = [s for s, g in body.foot_geom_ids.items() if geom_lowest(m, data, g)
                   < gains.stance_height]
         tau = np.zeros(len(kp))
         com = data.subtree_com[1]
@@ -107,7 +107,3 @@ def track(sim: SimModel, state0: np.ndarray, ref: Reference, start_step: int,
         mujoco.mj_step(m, data)
     return out
 
-
-def _lowest(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> float:
-    return float(data.geom_xpos[geom][2] - np.abs(data.geom_xmat[geom].reshape(3, 3)[2])
-                 @ model.geom_size[geom])
