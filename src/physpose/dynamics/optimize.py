@@ -67,20 +67,23 @@ class DynamicsConfig:
     targets (a foot inside the floor would stub it; a sunken body asks for bent knees).
     tracking_start: also simulate each window once with a balance feedback (tracking.py) and
     start CMA-ES from its fitted targets when they score better than the inverse-dynamics ones.
+    retries, retry_distance: a sequential window whose result hands on a state with the COM
+    more than retry_distance (m) from the estimate's is searched again (another seed, 1.5x the
+    step size), at most retries times.
     search: "all" hinges, or "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
     needs; arms, neck and head keep their inverse-dynamics targets). seed: CMA-ES seed.
     nthread: rollout threads (does not change results).
     """
 
     window: float = 1.0
-    overlap: float = 0.4
+    overlap: float = 0.6
     independent: bool = False
     parallel_windows: int = 4
     knot_spacing: float = 0.1
     reference_knot_spacing: float = 0.1
     popsize: int = 24
-    iterations: int = 40
-    sigma0: float = 0.02
+    iterations: int = 30
+    sigma0: float = 0.03
     diagonal: bool = True
     weights: ObjectiveWeights = field(default_factory=ObjectiveWeights)
     max_root_distance: float = 1.0
@@ -89,7 +92,9 @@ class DynamicsConfig:
     ground_snap: float = 0.03
     ground_reference: bool = True
     tracking_start: bool = False
-    search: str = "all"
+    retries: int = 2
+    retry_distance: float = 0.15
+    search: str = "legs_trunk"
     seed: int = 0
     nthread: int = 2
 
@@ -110,6 +115,9 @@ class DynamicsConfig:
         if self.search not in SEARCH_SETS:
             raise PhysposeError(f"dynamics search {self.search!r} is unknown",
                                 remedy=f"use one of {SEARCH_SETS}")
+        if self.retries < 0 or not self.retry_distance > 0:
+            raise PhysposeError("dynamics retries must be >= 0 and retry_distance > 0",
+                                remedy="use e.g. retries=2, retry_distance=0.15")
         if self.iterations < 0:
             raise PhysposeError("dynamics iterations must be >= 0", remedy="use e.g. 20")
 
@@ -123,7 +131,7 @@ class DynamicsConfig:
 PRESETS: dict[str, DynamicsConfig] = {
     "fast": DynamicsConfig(),
     # The paper's budget: 2000 iterations x 100 samples per 1 s window, full covariance.
-    "paper": DynamicsConfig(popsize=100, iterations=2000, diagonal=False),
+    "paper": DynamicsConfig(popsize=100, iterations=2000, diagonal=False, search="all"),
 }
 # Table 2 (bottom half): objective terms removed.
 ABLATIONS: dict[str, tuple[str, ...]] = {
@@ -348,10 +356,43 @@ def _record(win: Window, best: _Best, initial: dict, evaluations: int, seconds: 
             "loss_initial": initial["loss"], "terms_initial": initial["terms"],
             "initial_valid": initial["valid"], "loss_final": best.loss, "valid": best.valid,
             "start": ("inverse_dynamics", "tracking")[initial["start"]],
+            "attempts": initial.get("attempts", 1), "handover_error": initial.get("handover_error"),
             "terms_final": best.terms, "weights": weights.as_dict(), "seconds": seconds}
 
 
 _OUTPUT_KEYS = ("qpos", "joints", "landmarks", "com")
+
+
+def _handover_error(setup: _Setup, best: _Best, win: Window, step_end: int) -> float:
+    """Distance (m) between the simulated and the kinematic COM where the next window starts."""
+    com = best.sensors[step_end - win.start_step, -3:]
+    frame = int(round(step_end * setup.sim.dt * setup.objective.fps))
+    return float(np.linalg.norm(com - setup.objective.com[min(frame, len(setup.objective.com) - 1)]))
+
+
+def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _Setup,
+                         cfg: DynamicsConfig, timing: dict, w: int, step_end: int, label: str,
+                         progress: bool) -> tuple[_Best, dict, int]:
+    """Search a window; while its best sample hands the next window a state whose COM is more
+    than ``retry_distance`` from the estimate's (a fall in the making) or is invalid, search
+    again with another seed and a larger step size, up to ``retries`` times. Keeps the attempt
+    with the smallest handover error."""
+    chosen, evaluations = None, 0
+    for attempt in range(cfg.retries + 1):
+        attempt_cfg = dataclasses.replace(cfg, sigma0=cfg.sigma0 * 1.5 ** attempt)
+        search = _Search([problem], simulator, setup, attempt_cfg, timing)
+        (best,), (initial,) = search.run([_window_seed(cfg.seed + 7919 * attempt, w)],
+                                         label + (f" retry {attempt}" if attempt else ""),
+                                         progress)
+        evaluations += search.evaluations[0]
+        error = _handover_error(setup, best, problem.window, step_end) if best.valid else np.inf
+        if chosen is None or error < chosen[2]:
+            chosen = (best, initial, error)
+        if error <= cfg.retry_distance:
+            break
+    best, initial, error = chosen
+    initial = dict(initial, attempts=attempt + 1, handover_error=error)
+    return best, initial, evaluations
 
 
 def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, folder: Path | None,
@@ -371,16 +412,16 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             history = joints_so_far[max(0, win.first - 2):win.first] if w > 0 else None
             first_free = setup.grid.started_before(win.start_step * setup.sim.dt) if w else 0
             problem = _problem(setup, win, coefs, state, first_free, history, cfg)
-            search = _Search([problem], simulator, setup, cfg, timing)
-            (best,), (initial,) = search.run([_window_seed(cfg.seed, w)],
-                                             f"dynamics window {w + 1}/{len(wins)}", progress)
+            best, initial, evaluations = _search_with_retries(
+                problem, simulator, setup, cfg, timing, w, step_end,
+                f"dynamics window {w + 1}/{len(wins)}", progress)
             coefs = coefs.copy()
             coefs[problem.free] = problem.coefficients(best.x[None])[0]
             ctrl = problem.ctrl(best.x[None])[0][:step_end - win.start_step]
             out = _frame_outputs(setup, best, win, np.arange(win.first, commit_end))
             next_state = best.states[step_end - win.start_step]
-            record = _record(win, best, initial, search.evaluations[0],
-                             time.perf_counter() - start, cfg.weights)
+            record = _record(win, best, initial, evaluations, time.perf_counter() - start,
+                             cfg.weights)
             arrays = {"coefs": coefs, "next_state": next_state, "ctrl": ctrl, **out}
             if folder is not None:
                 checkpoint.save_window(folder, w, arrays, record)
