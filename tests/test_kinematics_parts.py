@@ -14,7 +14,7 @@ from physpose.fk import fk
 from physpose.joints import LANDMARK_INDEX
 from physpose.kinematics.config import KinematicConfig
 from physpose.kinematics.evidence import gather_evidence, padded_length, seed_frames
-from physpose.kinematics.ik import inverse_kinematics, measure_bones
+from physpose.kinematics.ik import inverse_kinematics
 from physpose.kinematics.losses import rotvec_matrix
 from physpose.kinematics.swaps import GROUPS, swap_states, unswap
 from physpose.reconstruction import Reconstruction
@@ -24,7 +24,7 @@ from physpose.skeleton import DOF_LIMITS, DOF_NAMES, NUM_DOF
 
 def test_inverse_kinematics_of_everyday_poses():
     """Moderate poses (a third of each joint range, elbows and knees bent) come back to within
-    a few centimetres from their landmarks alone, and the bones are measured exactly."""
+    a few centimetres from their landmarks alone."""
     rng = np.random.default_rng(3)
     shape = BodyShape.from_height(1.8)
     t = 64
@@ -35,7 +35,6 @@ def test_inverse_kinematics_of_everyday_poses():
         angles[:, DOF_NAMES.index(f"{joint}_y")] = sign * rng.uniform(0.3, 1.2, t)
     R = Rotation.random(t, random_state=4).as_matrix()
     _, landmarks = fk(shape.bones(), np.zeros((t, 3)), R, angles)
-    assert np.abs(measure_bones(landmarks) - shape.bones()).max() < 0.01
     R2, angles2 = inverse_kinematics(landmarks, shape.bones())
     _, back = fk(shape.bones(), np.zeros((t, 3)), R2, angles2)
     err = np.linalg.norm(back - landmarks, axis=-1)

@@ -47,7 +47,8 @@ class PoseWeights:
     temporal_*: +T smoothness: landmark velocities (the paper's first differences; off by
         default, they damp real motion, most of all in depth) and accelerations (m/s, m/s^2),
         hinge and root accelerations (rad/s^2), each divided by its sigma.
-    ground: +G contact term (the paper's L_gp with the plane fixed).
+    ground: +G contact term (the paper's L_gp with the plane fixed). ground_skate: +GT, soles
+        near the ground do not slide (not in the paper; it keeps the contacts +G makes still).
     """
 
     reprojection: float = 1.0
@@ -58,6 +59,7 @@ class PoseWeights:
     temporal_acceleration: float = 1.0
     temporal_angles: float = 1.0
     ground: float = 1.0
+    ground_skate: float = 1.0
     depth_scale_prior: float = 1.0
 
 
@@ -90,10 +92,13 @@ class GroundConfig:
     """
 
     k: int = 6                        # smallest signed distances per frame and point set
+    k_pose: int = 20                  # the same when re-fitting poses: feet land flat
     delta: float = 0.2                # m, clip: frames in the air do not pull the plane
     body_weight: float = 2.0          # the whole-body term's weight against each foot's
     foot_delta_pose: float = 0.02     # m, clip of the foot terms when re-fitting poses
     pose_scale: float = 0.01          # m, L_gp divided by this when re-fitting poses
+    contact_height: float = 0.01      # m, +GT: soles this high weigh 1/e in the skate term
+    sigma_skate: float = 0.1          # m/s, +GT: sole sliding speed scale
     roll_sigma_deg: float = 30.0      # prior: the camera's roll about its optical axis
     balance_sigma_deg: float = 5.0    # prior: the mean support -> centre of mass direction
     rounds: int = 1                   # (estimate T_g, re-fit poses) rounds

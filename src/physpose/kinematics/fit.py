@@ -184,6 +184,8 @@ def _pose_terms(cfg: KinematicConfig, temporal: bool, ground: bool, focal: bool)
                      temporal_angles=w.temporal_angles)
     if ground:
         terms.update(ground=w.ground)
+    if ground and temporal:
+        terms.update(ground_skate=w.ground_skate)
     return weight_dict(**terms)
 
 

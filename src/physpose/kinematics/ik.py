@@ -15,9 +15,7 @@ from scipy.spatial.transform import Rotation
 from physpose.fk import angles_from_matrices
 from physpose.joints import LANDMARK_INDEX
 from physpose.kinematics.camera import rotation_to
-from physpose.shape import BodyShape
-from physpose.skeleton import (BONE_NAMES, DOF_LIMITS, LANDMARK_SITES, PARENTS, SEGMENT_INDEX,
-                               landmark_offsets)
+from physpose.skeleton import DOF_LIMITS, LANDMARK_SITES, PARENTS, SEGMENT_INDEX, landmark_offsets
 
 _FACE = ("nose", "left_eye_inner", "left_eye", "left_eye_outer", "right_eye_inner", "right_eye",
          "right_eye_outer", "left_ear", "right_ear", "mouth_left", "mouth_right")
@@ -149,34 +147,3 @@ def inverse_kinematics(landmarks: np.ndarray, bones: np.ndarray) -> tuple[np.nda
     """(root rotations (T, 3, 3), hinge angles (T, 48)) of the skeleton best matching landmarks."""
     rot = segment_rotations(landmarks, bones)
     return rot[:, 0], angles_from_rotations(rot)
-
-
-def measure_bones(landmarks: np.ndarray) -> np.ndarray:
-    """Bone lengths (13,) measured on landmarks (T, 33, 3) metres: medians over frames, both
-    sides averaged. Ankle height and heel offset split the ankle-heel distance in the average
-    adult's proportion."""
-    lm = np.asarray(landmarks, dtype=float)
-    at = {n: lm[:, i] for n, i in LANDMARK_INDEX.items()}
-
-    def dist(a: str, b: str) -> float:
-        return float(np.median(np.linalg.norm(at[a] - at[b], axis=-1)))
-
-    def both(a: str, b: str) -> float:
-        return 0.5 * (dist(f"left_{a}", f"left_{b}") + dist(f"right_{a}", f"right_{b}"))
-
-    def mid(a: str) -> np.ndarray:
-        return 0.5 * (at[f"left_{a}"] + at[f"right_{a}"])
-
-    trunk = float(np.median(np.linalg.norm(mid("shoulder") - mid("hip"), axis=-1)))
-    neck = float(np.median(np.linalg.norm(mid("ear") - mid("shoulder"), axis=-1)))
-    ref = BodyShape.from_height(1.7)
-    heel_dist = both("ankle", "heel")
-    k = heel_dist / np.hypot(ref.heel_back, 0.75 * ref.ankle_height)
-    lengths = {"hip_width": dist("left_hip", "right_hip"), "trunk": trunk,
-               "shoulder_width": dist("left_shoulder", "right_shoulder"), "neck": neck,
-               "ear_width": dist("left_ear", "right_ear"), "upper_arm": both("shoulder", "elbow"),
-               "forearm": both("elbow", "wrist"), "hand": both("wrist", "index"),
-               "thigh": both("hip", "knee"), "shank": both("knee", "ankle"),
-               "ankle_height": k * ref.ankle_height, "foot_length": both("heel", "foot_index"),
-               "heel_back": k * ref.heel_back}
-    return np.array([lengths[n] for n in BONE_NAMES])

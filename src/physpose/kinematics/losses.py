@@ -181,3 +181,18 @@ def cost_ground(pose: Pose, data: Data, surface: SurfacePoints, k, delta, foot_d
     for mask in (surface.left_foot, surface.right_foot):
         per = per + ground_term(dist[:, np.flatnonzero(mask)], k, foot_delta)
     return _frame_mean(per, data) / scale
+
+
+def cost_ground_skate(pose: Pose, data: Data, surface: SurfacePoints, height_scale, sigma):
+    """(+GT) Sliding of soles on the ground: horizontal velocities (m/s / sigma) of the sole
+    points, each weighted by exp(-height / height_scale) (about 1 in contact, the weight itself
+    not differentiated: the term must not lift feet to escape), mean over sole points."""
+    soles = np.flatnonzero(surface.left_foot | surface.right_foot)
+    pts = place(surface, pose.seg_pos, pose.seg_rot, jnp)[:, soles]
+    n = data.plane[:3]
+    h = jnp.maximum(pts @ n + data.plane[3], 0.0)
+    w = jax.lax.stop_gradient(jnp.exp(-0.5 * (h[1:] + h[:-1]) / height_scale))
+    v = jnp.diff(pts, axis=0) * data.fps
+    vh = v - (v @ n)[..., None] * n
+    per = jnp.mean(w * jnp.sum(vh * vh, -1), -1) / sigma ** 2
+    return _pair_mean(per, _pair_weight(data, 1))

@@ -24,7 +24,8 @@ from physpose.skeleton import BONE_INDEX, NUM_BONES
 
 TERMS: tuple[str, ...] = (
     "reprojection", "world_landmarks", "pose_prior", "joint_limits", "temporal_velocity",
-    "temporal_acceleration", "temporal_angles", "ground", "depth_scale_prior", "bone_prior",
+    "temporal_acceleration", "temporal_angles", "ground", "ground_skate", "depth_scale_prior",
+    "bone_prior",
     "focal_prior")
 # Stature = this vector . bones (shape.stature_from_bones, linear in the bones).
 _STATURE = np.zeros(NUM_BONES)
@@ -73,6 +74,8 @@ class Settings:
     foot_delta: float
     body_weight: float
     ground_scale: float
+    contact_height: float
+    sigma_skate: float
     bone_log_sigma: float
     depth_log_sigma: float
     focal_log_sigma: float
@@ -128,6 +131,9 @@ def terms(params: Params, fixed: Fixed, data: Data, s: Settings) -> dict[str, ja
         "temporal_angles": losses.cost_temporal_angles(pose, data, s.sigma_angle_acceleration),
         "ground": losses.cost_ground(pose, data, s.surface(fixed.surface_offset), s.k, s.delta,
                                      s.foot_delta, s.body_weight, s.ground_scale) if s.ground_on else 0.0,
+        "ground_skate": losses.cost_ground_skate(
+            pose, data, s.surface(fixed.surface_offset), s.contact_height, s.sigma_skate)
+        if s.ground_on else 0.0,
         "depth_scale_prior": (params.log_depth_scale / s.depth_log_sigma) ** 2,
         "bone_prior": jnp.sum(((log_b - log_prop) / s.bone_log_sigma) ** 2),
         "focal_prior": ((params.log_focal - fixed.log_focal_prior) / s.focal_log_sigma) ** 2,

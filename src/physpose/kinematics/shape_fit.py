@@ -15,10 +15,10 @@ import numpy as np
 
 from physpose.kinematics.config import KinematicConfig
 from physpose.kinematics.evidence import Evidence, padded_length, seed_frames
-from physpose.kinematics.ik import measure_bones
 from physpose.kinematics.objective import bones_of, weight_dict
 from physpose.kinematics.pose_fit import Settings, initial_pose, make_params, make_problem
-from physpose.shape import BodyShape, stature_from_bones
+from physpose.shape import BodyShape, bone_lengths_from_landmarks, stature_from_bones
+from physpose.skeleton import BONE_NAMES
 
 
 @dataclass(frozen=True)
@@ -38,7 +38,8 @@ def fit_shape(ev: Evidence, K: np.ndarray, cfg: KinematicConfig, settings: Setti
     """Fit bone lengths and the seed frames' poses; the shape's radii follow from its stature
     and mass (shape.BodyShape.from_bone_lengths)."""
     seeds = seed_frames(ev, cfg.shape.seed_frames, int(round(cfg.shape.seed_spacing_s * ev.fps)))
-    bones = measure_bones(ev.world_cam()[seeds])
+    lengths = bone_lengths_from_landmarks(ev.world_cam()[seeds])
+    bones = np.array([lengths[n] for n in BONE_NAMES])
     if height is not None:
         bones = bones * height / stature_from_bones(bones)
     root_pos, R0, angles = initial_pose(ev, seeds, bones, K, 1.0, 1.0)
