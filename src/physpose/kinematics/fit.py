@@ -227,11 +227,12 @@ def fit_variants(obs: Observations, variants: tuple[str, ...], cfg: KinematicCon
             p, problem, _ = stages[base]
             for _ in range(cfg.ground_plane.rounds):
                 plane = _estimate_ground(ctx, p, problem)
+                timer.lap("ground_plane")
                 problem = ctx.problem_at(p, plane)
                 p, losses = problem.run(p, free, _pose_terms(cfg, temporal, True, focal),
                                         cfg.pose.iterations)
+                timer.lap("ground_pose")
             stages[name] = (p, problem, losses)
-            timer.lap("ground")
         for v in variants:
             p, problem, losses = stages[v]
             ground = v in ("SO+G", "SO+GT")

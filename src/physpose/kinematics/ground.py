@@ -48,7 +48,7 @@ def _normal(tilt, n0, e1, e2):
 
 
 _SUPPORT_BAND = 0.03  # m: surface points this close to the lowest one form the support
-_MAX_ROUNDS = 5       # restarts of the plane fit from its own result
+_MAX_ROUNDS = 3       # restarts of the plane fit from its own result
 
 
 def _plane_loss(p: PlaneParams, n0, e1, e2, points, weight, left, right, balance, roll_sigma,
@@ -127,9 +127,9 @@ def _fit_plane(points, left, right, balance, n0, cfg: GroundConfig):
     length = padded_length(len(points))  # a few array sizes: compiled code is reused
     weight = np.zeros(length)
     weight[:len(points)] = 1.0
-    args = (n0, e1, e2, pad(points, length), weight, np.flatnonzero(left),
-            np.flatnonzero(right), pad(balance, length), np.radians(cfg.roll_sigma_deg),
-            np.radians(cfg.balance_sigma_deg))
+    args = tuple(jnp.asarray(a) for a in (  # on the device once, not at every evaluation
+        n0, e1, e2, pad(points, length), weight, np.flatnonzero(left), np.flatnonzero(right),
+        pad(balance, length), np.radians(cfg.roll_sigma_deg), np.radians(cfg.balance_sigma_deg)))
 
     def value_and_grad(p: PlaneParams):
         return _plane_value_and_grad(p, *args, k=cfg.k, delta=cfg.delta,
