@@ -75,7 +75,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     height (m) and mass (kg) of the person, when known, fix the body's size and weight.
     resume=False discards the dynamics checkpoints of an earlier run in out_dir.
     """
-    from physpose.kinematics.fit import fit_kinematics  # noqa: PLC0415 (heavy JAX import)
+    from physpose.kinematics.fit import fit_kinematics, stderr_log  # noqa: PLC0415 (JAX)
 
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
@@ -96,7 +96,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
 
     obs = load_observations(video_or_observations, config.observe, progress)
     lap("observe")
-    kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass)
+    kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
+                         **({"log": stderr_log} if progress else {}))
     lap("kinematics")
     body = build_body(kin.shape, config.scene, config.body)
     lap("body")
