@@ -84,6 +84,20 @@ def test_tracking_start_is_a_second_start_guess(clip):
     assert all(w["start"] == "inverse_dynamics" for w in plain.windows)
 
 
+def test_a_window_left_far_from_the_estimate_hands_on_a_restart(clip):
+    body, fit, obs = clip
+    jumped = fit.qpos.copy()
+    jumped[5:, 0] += 0.6  # the estimate teleports 0.6 m forward at frame 5
+    cfg = dataclasses.replace(TINY, retries=0)
+    res = optimize_dynamics(body, dataclasses.replace(fit, qpos=jumped), obs, cfg,
+                            checkpoints=False, progress=False)
+    first_reset = next(i for i, w in enumerate(res.windows) if w["reset_after"])
+    assert res.windows[first_reset]["handover_error"] > cfg.reset_distance
+    restart = res.windows[first_reset + 1]["frames"][0]
+    assert abs(res.qpos[restart, 0] - jumped[restart, 0]) < 0.05
+    assert not res.windows[-1]["reset_after"]
+
+
 @pytest.mark.parametrize("independent", [False, True])
 def test_interrupted_run_resumes_to_the_uninterrupted_result(clip, tmp_path, monkeypatch,
                                                              independent):

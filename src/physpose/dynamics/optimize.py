@@ -69,7 +69,9 @@ class DynamicsConfig:
     start CMA-ES from its fitted targets when they score better than the inverse-dynamics ones.
     retries, retry_distance: a sequential window whose result hands on a state with the COM
     more than retry_distance (m) from the estimate's is searched again (another seed, 1.5x the
-    step size), at most retries times.
+    step size), at most retries times. reset_distance: if the kept result still hands on a COM
+    further than this (m) from the estimate's, the next window restarts from the kinematic
+    state (a discontinuity instead of a fall that would carry on; recorded as reset_after).
     search: "all" hinges, or "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
     needs; arms, neck and head keep their inverse-dynamics targets). seed: CMA-ES seed.
     nthread: rollout threads (does not change results).
@@ -94,6 +96,7 @@ class DynamicsConfig:
     tracking_start: bool = False
     retries: int = 2
     retry_distance: float = 0.15
+    reset_distance: float = 0.3
     search: str = "legs_trunk"
     seed: int = 0
     nthread: int = 2
@@ -115,7 +118,7 @@ class DynamicsConfig:
         if self.search not in SEARCH_SETS:
             raise PhysposeError(f"dynamics search {self.search!r} is unknown",
                                 remedy=f"use one of {SEARCH_SETS}")
-        if self.retries < 0 or not self.retry_distance > 0:
+        if self.retries < 0 or not self.retry_distance > 0 or not self.reset_distance > 0:
             raise PhysposeError("dynamics retries must be >= 0 and retry_distance > 0",
                                 remedy="use e.g. retries=2, retry_distance=0.15")
         if self.iterations < 0:
@@ -402,6 +405,7 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
     state = _kinematic_state(setup, 0, cfg.ground_snap)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in _OUTPUT_KEYS}
     ctrl_parts, records = [], []
+    reset = False
     for w, win in enumerate(wins):
         commit_end = wins[w + 1].first if w + 1 < len(wins) else win.last + 1
         step_end = wins[w + 1].start_step if w + 1 < len(wins) else win.end_step
@@ -409,8 +413,9 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
         if saved is None:
             start = time.perf_counter()
             joints_so_far = np.concatenate(parts["joints"]) if parts["joints"] else np.zeros((0,))
-            history = joints_so_far[max(0, win.first - 2):win.first] if w > 0 else None
-            first_free = setup.grid.started_before(win.start_step * setup.sim.dt) if w else 0
+            history = joints_so_far[max(0, win.first - 2):win.first] if w and not reset else None
+            first_free = setup.grid.started_before(win.start_step * setup.sim.dt) \
+                if w and not reset else 0
             problem = _problem(setup, win, coefs, state, first_free, history, cfg)
             best, initial, evaluations = _search_with_retries(
                 problem, simulator, setup, cfg, timing, w, step_end,
@@ -428,6 +433,16 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
         else:
             arrays, record = saved
         coefs, state = arrays["coefs"], arrays["next_state"]
+        # A window that could not keep the body near the estimate hands on a restart from the
+        # kinematic state instead of a fall in progress (a jump in the output, recorded).
+        reset = w + 1 < len(wins) and record.get("handover_error") is not None \
+            and record["handover_error"] > cfg.reset_distance
+        if reset:
+            state = _kinematic_state(setup, wins[w + 1].start_step, cfg.ground_snap)
+            coefs = np.where(np.arange(len(coefs))[:, None] >= setup.grid.active(
+                wins[w + 1].start_step * setup.sim.dt, setup.grid.duration).start, setup.coefs0,
+                coefs)
+        record = dict(record, reset_after=bool(reset))
         for k in _OUTPUT_KEYS:
             parts[k].append(arrays[k])
         ctrl_parts.append(arrays["ctrl"])
