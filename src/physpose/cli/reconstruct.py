@@ -1,49 +1,255 @@
-"""`physpose reconstruct`: video -> physically simulated 3d motion (reconstruction.npz)."""
+"""`physpose reconstruct`: video -> physically simulated 3d motion, metrics, report, overlay, exports."""
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 from physpose.dynamics import PRESETS
-from physpose.pipeline import CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig, reconstruct
+from physpose.errors import PhysposeError
+from physpose.export import FORMATS
+from physpose.keypoints_io import is_keypoints_file
+from physpose.observations import Observations
+from physpose.outputs import DEFAULT_FORMATS, METRICS_FILE, metrics_table, write_outputs
+from physpose.pipeline import CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig
+from physpose.reconstruction import Reconstruction
+from physpose.scene import SceneConfig, parse_obstacle, trampoline
+
+_OUTPUT_NAMES = {"metrics": "metrics", "report": "report (open in a browser)",
+                 "overlay": "overlay video", "overlay_png": "overlay frame",
+                 "bvh": "BVH (Blender)", "glb": "glTF binary", "csv": "joint table (CSV)",
+                 "json": "joint table (JSON)"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "reconstruct", help="video -> physically plausible 3d motion (all stages)",
-        description="Observe the person in a video (or read a keypoints .json/.npz), fit the "
-                    "kinematic estimate, build a body sized to the person and optimise the "
-                    "motor targets of its simulation; writes reconstruction.npz and "
-                    "config.json into --out. An interrupted run resumes where it stopped.")
+        "reconstruct", help="video -> physically plausible 3d motion, report, overlay, exports",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Observe the person in a video (or read a keypoints .json/.npz), fit the\n"
+                    "kinematic estimate, build a body sized to the person and optimise the motor\n"
+                    "targets of its simulation. Writes into --out: reconstruction.npz,\n"
+                    "config.json, metrics.json, report.html, overlay.mp4 + overlay.png and the\n"
+                    "exports (motion.bvh, motion.glb, joints.csv); prints the metrics, the files\n"
+                    "and the time per stage. An interrupted run resumes where it stopped.",
+        epilog="examples:\n"
+               "  physpose reconstruct walk.mp4 --out out/walk --height 1.75\n"
+               "  physpose reconstruct jump.mp4 --out out/jump --start 2 --end 5 --trampoline\n"
+               "  physpose reconstruct sit.mp4 --out out/sit "
+               "--obstacle box:-0.35,0,0.225,0.45,0.45,0.45\n"
+               "  physpose reconstruct cam01.mp4 --out out/c1 --camera Calib.qca.txt "
+               "--camera-name cam01")
     p.add_argument("video", type=Path, help="video file, or a keypoints .json/.npz")
-    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--preset", choices=tuple(PRESETS), default="fast",
-                   help="optimisation budget: fast (default) or paper (2000 x 100 samples per "
-                        "1 s window: hours per second of video on a few cores)")
-    p.add_argument("--height", type=float, help="the person's standing height, m")
-    p.add_argument("--mass", type=float, help="the person's mass, kg")
-    p.add_argument("--fps", type=float, help="analysis frame rate, Hz (default 25)")
-    p.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
+                   help="optimisation budget: fast (default; about a minute per second of "
+                        "video on 2 cores) or paper (2000 x 100 samples per 1 s window: hours "
+                        "per second of video)")
+    g = p.add_argument_group("the person and the video")
+    g.add_argument("--height", type=float, metavar="M", help="the person's standing height, m")
+    g.add_argument("--mass", type=float, metavar="KG", help="the person's mass, kg")
+    g.add_argument("--fps", type=float, help="analysis frame rate, Hz (default 25)")
+    g.add_argument("--start", type=float, metavar="S", help="first second analysed (default 0)")
+    g.add_argument("--end", type=float, metavar="S",
+                   help="analysis stops before this second (default: end of the video)")
+    g.add_argument("--camera", type=Path, metavar="FILE",
+                   help="camera calibration: a Qualisys .qca.txt, or a JSON file "
+                        '{"K": [[fx,0,cx],[0,fy,cy],[0,0,1]]} (default: intrinsics estimated)')
+    g.add_argument("--camera-name", metavar="NAME",
+                   help="which camera of a .qca.txt (default: the only one whose image size "
+                        "matches the video, else the one named in the video's file name)")
+    g = p.add_argument_group("the scene (ground contact and obstacles)")
+    g.add_argument("--ground-friction", type=float, metavar="MU",
+                   help="sliding friction of the ground (default 0.9)")
+    g.add_argument("--ground-stiffness", type=float, metavar="K",
+                   help="ground stiffness, 1/s^2 per unit mass (default: a hard floor)")
+    g.add_argument("--ground-damping", type=float, metavar="D",
+                   help="ground damping, 1/s (default: critical for the stiffness)")
+    g.add_argument("--trampoline", action="store_true",
+                   help="a soft, springy floor (stiffness 150, damping 1.5)")
+    g.add_argument("--obstacle", action="append", default=[], metavar="box:x,y,z,sx,sy,sz[,yaw]",
+                   help="a box in the world (centre and full sizes in m, yaw in degrees; "
+                        "repeatable), e.g. a chair seat box:-0.35,0,0.225,0.45,0.45,0.45")
+    g = p.add_argument_group("outputs")
+    g.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
                    help="reuse finished optimisation windows of an earlier run in --out "
                         "(default); --no-resume starts over")
+    g.add_argument("--no-report", action="store_true", help="skip report.html")
+    g.add_argument("--no-overlay", action="store_true", help="skip overlay.mp4 and overlay.png")
+    g.add_argument("--export", default=",".join(DEFAULT_FORMATS), metavar="FORMATS",
+                   help=f"comma-separated export formats out of {', '.join(FORMATS)} "
+                        f"(default {','.join(DEFAULT_FORMATS)}; 'none' for no exports)")
     p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
+def parse_formats(text: str) -> tuple[str, ...]:
+    """'bvh,glb' -> ('bvh', 'glb'); 'none' or '' -> ()."""
+    names = tuple(f.strip().lower() for f in text.split(",") if f.strip())
+    if names in ((), ("none",)):
+        return ()
+    unknown = [f for f in names if f not in FORMATS]
+    if unknown:
+        raise PhysposeError(f"unknown export format(s) {', '.join(map(repr, unknown))}",
+                            remedy=f"give --export as a comma-separated list of "
+                                   f"{', '.join(FORMATS)} (or none)")
+    return names
+
+
+def scene_config(args: argparse.Namespace) -> SceneConfig:
+    """The scene of the ground/obstacle flags."""
+    scene = trampoline() if args.trampoline else SceneConfig()
+    if (args.ground_stiffness, args.ground_damping, args.ground_friction) != (None,) * 3:
+        scene = scene.with_ground(args.ground_stiffness, args.ground_damping,
+                                  args.ground_friction)
+    obstacles = tuple(parse_obstacle(text) for text in args.obstacle)
+    return dataclasses.replace(scene, obstacles=obstacles) if obstacles else scene
+
+
+def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
+    """The composed config of the flags (validated, before any heavy work)."""
     config = PipelineConfig.preset(args.preset)
+    observe = config.observe
     if args.fps is not None:
-        config = dataclasses.replace(
-            config, observe=dataclasses.replace(config.observe, target_fps=args.fps))
-    start = time.perf_counter()
-    recon = reconstruct(args.video, args.out, config, height=args.height, mass=args.mass,
-                        resume=args.resume, progress=sys.stderr.isatty())
-    seconds = time.perf_counter() - start
-    losses = recon.meta.get("dynamics", {}).get("losses", {})
-    print(f"{args.video.name}: {recon.num_frames} frames at {recon.fps:g} fps reconstructed in "
-          f"{seconds:.1f} s (dynamics loss {losses.get('total', float('nan')):.3g})")
-    print(f"  wrote {args.out / RECONSTRUCTION_FILE}\n  wrote {args.out / CONFIG_FILE}")
+        observe = dataclasses.replace(observe, target_fps=args.fps)
+    observe = dataclasses.replace(observe, start=args.start, end=args.end)
+    return dataclasses.replace(config, observe=observe, scene=scene_config(args))
+
+
+def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:
+    """Fail fast on a missing/unreadable video or a time range outside it; returns the
+    video's (width, height), None for a keypoints file."""
+    from physpose import video as videolib  # noqa: PLC0415
+
+    if is_keypoints_file(video):
+        if not video.is_file():
+            raise PhysposeError("keypoints file not found", path=video, remedy="check the path")
+        o = config.observe
+        if (o.start, o.end) != (None, None):
+            raise PhysposeError("--start/--end apply to videos, not to precomputed keypoints",
+                                path=video, remedy="drop them, or cut the keypoints file")
+        return None
+    info = videolib.probe(video)
+    videolib.plan_frames(info, config.observe.target_fps, config.observe.start,
+                         config.observe.end)
+    return info.image_size
+
+
+def check_person(height: float | None, mass: float | None) -> None:
+    """Range checks of --height/--mass before any heavy work."""
+    from physpose.shape import BodyShape  # noqa: PLC0415
+
+    if mass is not None and height is None:
+        BodyShape.from_height(1.75, mass)
+    elif height is not None:
+        BodyShape.from_height(height, mass)
+
+
+def camera_intrinsics(path: Path, name: str | None, video: Path,
+                      image_size: tuple[int, int] | None) -> np.ndarray:
+    """K (3, 3) from a Qualisys .qca.txt (one camera of it) or a JSON/text intrinsics file."""
+    from physpose.cli.fit import read_intrinsics  # noqa: PLC0415
+
+    if not path.name.lower().endswith((".qca.txt", ".qca")):
+        if name is not None:
+            raise PhysposeError("--camera-name applies to a Qualisys .qca.txt calibration",
+                                path=path, remedy="drop --camera-name")
+        return read_intrinsics(path)
+    from physpose.multiview.qualisys import load_qualisys  # noqa: PLC0415
+
+    cameras = load_qualisys(path)
+    listing = ", ".join(f"{c.name} ({c.image_size[0]}x{c.image_size[1]})" for c in cameras)
+    if name is not None:
+        chosen = [c for c in cameras if c.name == name]
+        if not chosen:
+            raise PhysposeError(f"no camera named {name!r}; the file has {listing}", path=path,
+                                remedy="pass one of those names to --camera-name")
+    else:
+        chosen = cameras
+        if image_size is not None:
+            chosen = [c for c in cameras if _fits(c, image_size)]
+        if len(chosen) > 1:
+            chosen = [c for c in chosen if c.name.lower() in video.stem.lower()]
+        if len(chosen) != 1:
+            raise PhysposeError(f"cannot tell which camera filmed {video.name}; the file has "
+                                f"{listing}", path=path,
+                                remedy="choose one with --camera-name NAME")
+    camera = chosen[0]
+    if image_size is not None:
+        camera = camera.for_image_size(*image_size, source=video)
+    return camera.K
+
+
+def _fits(camera, image_size: tuple[int, int]) -> bool:
+    try:
+        camera.for_image_size(*image_size)
+    except PhysposeError:
+        return False
+    return True
+
+
+def print_summary(recon: Reconstruction, out: Path, written: dict[str, Path],
+                  metrics: dict | None, timings: dict[str, float]) -> None:
+    """The end-of-run summary: metrics table, files and time per stage."""
+    motions = "physics and kinematic motion" if recon.has_physics else "kinematic motion only"
+    print(f"\n{recon.num_frames} frames at {recon.fps:g} fps ({recon.num_frames / recon.fps:.2f}"
+          f" s), {motions}")
+    if metrics:
+        print("\nmetrics (no ground truth needed; docs/metrics.md):")
+        print(metrics_table(metrics))
+    print(f"\nfiles in {out.resolve()}:")
+    files = {"reconstruction": out / RECONSTRUCTION_FILE, "config": out / CONFIG_FILE,
+             **written}
+    for key, path in files.items():
+        print(f"  {_OUTPUT_NAMES.get(key, key):<26} {path.name}")
+    total = sum(timings.values())
+    print("\ntime per stage: " + ", ".join(f"{k} {v:.1f} s" for k, v in timings.items())
+          + f" (total {total:.1f} s)")
+
+
+def load_input(video: Path, config: PipelineConfig, camera_K: np.ndarray | None
+               ) -> Observations:
+    """Observations of the input (observe stage, cached), with the calibration's K if given."""
+    from physpose.pipeline import load_observations  # noqa: PLC0415
+
+    print(f"observe: {video}", file=sys.stderr, flush=True)
+    obs = load_observations(video, config.observe, progress=True)
+    return obs if camera_K is None else dataclasses.replace(obs, camera_K=camera_K)
+
+
+def run(args: argparse.Namespace) -> int:
+    from physpose.pipeline import reconstruct  # noqa: PLC0415 (heavy imports)
+
+    formats = parse_formats(args.export)
+    config = pipeline_config(args)
+    image_size = check_input(args.video, config)
+    check_person(args.height, args.mass)
+    K = None if args.camera is None else camera_intrinsics(args.camera, args.camera_name,
+                                                           args.video, image_size)
+    timings: dict[str, float] = {}
+    clock = time.perf_counter()
+    obs = load_input(args.video, config, K)
+    timings["observe"] = time.perf_counter() - clock
+    recon = reconstruct(obs, args.out, config, height=args.height, mass=args.mass,
+                        resume=args.resume, progress=True)
+    timings.update({k: v for k, v in recon.meta.get("timings_s", {}).items()
+                    if k != "observe"})
+    written, metrics = finish(args.out, formats, report=not args.no_report,
+                              overlay=not args.no_overlay, timings=timings)
+    print_summary(recon, args.out, written, metrics, timings)
     return 0
+
+
+def finish(out: Path, formats: tuple[str, ...], *, report: bool, overlay: bool,
+           timings: dict[str, float]) -> tuple[dict[str, Path], dict]:
+    """write_outputs with a progress line; adds its time to timings; returns (files, metrics)."""
+    print("outputs: metrics" + ", report" * report + ", overlay video" * overlay
+          + "".join(f", {f}" for f in formats), file=sys.stderr, flush=True)
+    clock = time.perf_counter()
+    written = write_outputs(out, formats=formats, report=report, overlay=overlay)
+    timings["outputs"] = time.perf_counter() - clock
+    return written, json.loads((out / METRICS_FILE).read_text())

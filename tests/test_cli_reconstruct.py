@@ -1,0 +1,165 @@
+"""`physpose reconstruct` / `demo` / help: flags, clear errors (exit 2), summary, one end-to-end run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from physpose.cli import SUBCOMMANDS, build_parser, main
+from physpose.cli.reconstruct import (camera_intrinsics, parse_formats, pipeline_config,
+                                      print_summary)
+from physpose.errors import PhysposeError
+from synthetic_result import make_reconstruction, save_result, write_video
+
+
+@pytest.fixture(scope="module")
+def clip(tmp_path_factory):
+    """A 2 s synthetic video, 320 x 240 at 25 fps."""
+    return write_video(tmp_path_factory.mktemp("clip") / "clip.mp4", num_frames=50, fps=25.0)
+
+
+def _args(*argv: str):
+    return build_parser().parse_args(["reconstruct", *argv])
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--start", "5"], "start 5 s is outside the video (0-2.000 s)"),
+    (["--start", "-1"], "outside the video"),
+    (["--end", "3"], "past the end of the video (2.000 s)"),
+    (["--start", "1.5", "--end", "1"], "must be after start"),
+    (["--obstacle", "box:1,2"], "has 2 numbers, expected 6 or 7"),
+    (["--obstacle", "sphere:0,0,0,1,1,1"], "is not a box specification"),
+    (["--obstacle", "box:0,0,0,a,1,1"], "not a number"),
+    (["--obstacle", "box:0,0,0,1,1,-1"], "sizes must be positive"),
+    (["--export", "bvh,fbx"], "unknown export format(s) 'fbx'"),
+    (["--ground-friction", "-1"], "ground friction -1.0 must be >= 0"),
+    (["--ground-stiffness", "0"], "ground stiffness 0.0 must be positive"),
+    (["--height", "9"], "height 9.0 m is outside"),
+    (["--fps", "1000"], "outside"),
+    (["--camera", "{missing}.json"], "camera file not found"),
+    (["--camera", "{bad_json}"], "cannot read camera intrinsics"),
+    (["--camera", "{good_json}", "--camera-name", "cam01"], "applies to a Qualisys"),
+])
+def test_bad_input_gives_a_message_and_exit_2(clip, tmp_path, capsys, argv, message):
+    (tmp_path / "bad.json").write_text('{"K": [[1, 2], [3]]}')
+    (tmp_path / "good.json").write_text(json.dumps({"K": [[300, 0, 160], [0, 300, 120],
+                                                          [0, 0, 1]]}))
+    where = {"missing": tmp_path / "nope", "bad_json": tmp_path / "bad.json",
+             "good_json": tmp_path / "good.json"}
+    argv = [a.format(**where) for a in argv]
+    assert main(["reconstruct", str(clip), "--out", str(tmp_path / "out"), *argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+    assert not (tmp_path / "out" / "reconstruction.npz").exists()
+
+
+@pytest.mark.parametrize("video, message", [
+    ("nope.mp4", "file not found"), ("still.png", "this is an image"),
+    ("keys.json", "keypoints file not found")])
+def test_bad_video_gives_exit_2(tmp_path, capsys, video, message):
+    (tmp_path / "still.png").write_bytes(b"\x89PNG")
+    assert main(["reconstruct", str(tmp_path / video), "--out", str(tmp_path / "o")]) == 2
+    assert message in capsys.readouterr().err
+
+
+def test_time_range_on_keypoints_is_refused(tmp_path, capsys):
+    keys = tmp_path / "keys.npz"
+    keys.write_bytes(b"")
+    assert main(["reconstruct", str(keys), "--out", str(tmp_path / "o"), "--end", "1"]) == 2
+    assert "apply to videos" in capsys.readouterr().err
+
+
+def test_flags_make_the_pipeline_config():
+    cfg = pipeline_config(_args("v.mp4", "--out", "o", "--preset", "paper", "--fps", "20",
+                                "--start", "0.5", "--end", "2", "--trampoline",
+                                "--ground-friction", "0.5", "--obstacle",
+                                "box:-0.35,0,0.225,0.45,0.45,0.45,30", "--obstacle",
+                                "box:1,1,0.1,0.4,0.4,0.2"))
+    assert (cfg.observe.target_fps, cfg.observe.start, cfg.observe.end) == (20, 0.5, 2)
+    assert cfg.dynamics.iterations == 2000
+    assert cfg.scene.ground_friction == 0.5
+    assert cfg.scene.ground_stiffness_damping() == pytest.approx((150.0, 1.5))
+    assert len(cfg.scene.obstacles) == 2
+    assert cfg.scene.obstacles[0].yaw == pytest.approx(np.radians(30))
+    default = pipeline_config(_args("v.mp4", "--out", "o"))
+    assert default.scene.obstacles == () and default.scene.ground_solref == (0.02, 1.0)
+    stiff = pipeline_config(_args("v.mp4", "--out", "o", "--ground-stiffness", "400"))
+    assert stiff.scene.ground_stiffness_damping() == pytest.approx((400.0, 40.0))
+
+
+def test_export_formats():
+    assert parse_formats("bvh, GLB,csv") == ("bvh", "glb", "csv")
+    assert parse_formats("none") == () == parse_formats("")
+    with pytest.raises(PhysposeError, match="'fbx'"):
+        parse_formats("fbx")
+
+
+def test_json_camera(tmp_path):
+    path = tmp_path / "cam.json"
+    K = [[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]]
+    path.write_text(json.dumps({"K": K}))
+    assert np.allclose(camera_intrinsics(path, None, Path("v.mp4"), (320, 240)), K)
+
+
+def test_qualisys_camera_choice(pose2sim_demo):
+    calib = pose2sim_demo / "calibration" / "Calib.qca.txt"
+    # All four cameras are 1088 x 1920 (the videos 1080 x 1920, a crop): the file name decides.
+    k1 = camera_intrinsics(calib, None, Path("videos/cam01.mp4"), (1080, 1920))
+    k3 = camera_intrinsics(calib, "cam03", Path("videos/cam01.mp4"), (1080, 1920))
+    assert k1[0, 0] != k3[0, 0]
+    half = camera_intrinsics(calib, "cam01", Path("x.mp4"), (544, 960))
+    assert half[0, 0] == pytest.approx(k1[0, 0] / 2)
+    with pytest.raises(PhysposeError, match="cannot tell which camera.*cam01 \\(1088x1920\\)"):
+        camera_intrinsics(calib, None, Path("clip.mp4"), (1080, 1920))
+    with pytest.raises(PhysposeError, match="no camera named 'cam9'"):
+        camera_intrinsics(calib, "cam9", Path("clip.mp4"), (1080, 1920))
+    with pytest.raises(PhysposeError, match="calibrated for 1088x1920"):
+        camera_intrinsics(calib, "cam01", Path("clip.mp4"), (1920, 1080))
+
+
+def test_summary_lists_metrics_files_and_times(tmp_path, capsys):
+    folder = save_result(tmp_path, num_frames=5)
+    metrics = {"kinematic": {"float_pct": 12.5}, "physics": {"float_pct": 1.0}}
+    print_summary(make_reconstruction(num_frames=5), folder,
+                  {"report": folder / "report.html"}, metrics,
+                  {"observe": 1.0, "kinematics": 2.0, "dynamics": 3.5})
+    out = capsys.readouterr().out
+    assert "5 frames at 25 fps" in out and "physics and kinematic motion" in out
+    assert "float (% frames)" in out and "12.5" in out
+    assert "report.html" in out and "reconstruction.npz" in out
+    assert "dynamics 3.5 s" in out and "total 6.5 s" in out
+
+
+@pytest.mark.parametrize("command", [None, *SUBCOMMANDS])
+def test_every_help_is_complete(command, capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["--help"] if command is None else [command, "--help"])
+    assert done.value.code == 0
+    text = capsys.readouterr().out
+    assert "usage: physpose" in text and "-h, --help" in text
+    if command is None:
+        assert all(name in text for name in SUBCOMMANDS)
+    else:
+        described = [a for a in build_parser()._subparsers._group_actions[0].choices[command]
+                     ._actions if a.dest != "help"]
+        assert all(a.help for a in described), [a.dest for a in described if not a.help]
+
+
+@pytest.mark.slow
+def test_reconstruct_end_to_end_on_a_short_clip(pose2sim_demo, tmp_path, capsys):
+    video = pose2sim_demo / "videos" / "cam01.mp4"
+    out = tmp_path / "r"
+    assert main(["reconstruct", str(video), "--out", str(out), "--end", "0.8",
+                 "--export", "csv", "--camera", str(pose2sim_demo / "calibration" /
+                                                    "Calib.qca.txt")]) == 0
+    text = capsys.readouterr().out
+    assert "MPJPE-2d vs detections (px)" in text and "time per stage" in text
+    for name in ("reconstruction.npz", "config.json", "metrics.json", "report.html",
+                 "overlay.mp4", "overlay.png", "joints.csv"):
+        assert (out / name).stat().st_size > 0, name
+    metrics = json.loads((out / "metrics.json").read_text())
+    assert set(metrics) == {"kinematic", "physics"}
+    assert metrics["kinematic"]["mpjpe_2d_px"] < 30.0

@@ -1,0 +1,82 @@
+"""physpose.outputs: metrics without ground truth and every output file of a result folder."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import physpose.report as report
+from physpose.errors import PhysposeError
+from physpose.outputs import METRIC_LABELS, metrics_table, summarize, write_outputs
+from physpose.reconstruction import Reconstruction
+from synthetic_result import make_reconstruction, save_result, write_video
+
+
+@pytest.fixture(scope="module")
+def result(tmp_path_factory):
+    return save_result(tmp_path_factory.mktemp("outputs"), num_frames=8)
+
+
+def test_summarize_scores_both_motions(result):
+    metrics = summarize(result)
+    assert set(metrics) == {"kinematic", "physics"}
+    for values in metrics.values():
+        assert set(values) == set(METRIC_LABELS)
+        assert all(np.isfinite(v) and v >= 0 for v in values.values())
+    # The synthetic detections are the kinematic landmarks projected exactly; the physics
+    # motion is a phase-shifted walk, so it is further from them.
+    assert metrics["kinematic"]["mpjpe_2d_px"] < 1e-6
+    assert metrics["physics"]["mpjpe_2d_px"] > 1.0
+
+
+def test_mpjpe_2d_ignores_undetected_frames(tmp_path):
+    rec = make_reconstruction(num_frames=6, physics=False)
+    kp = rec.keypoints2d.copy()
+    kp[2] = 0.0  # an undetected frame: zeros with confidence 0
+    rec.replace(keypoints2d=kp).save(tmp_path / "reconstruction.npz")
+    assert summarize(tmp_path)["kinematic"]["mpjpe_2d_px"] < 1e-6
+
+
+def test_metrics_table_has_one_column_per_motion():
+    table = metrics_table({"kinematic": {"float_pct": 12.5}, "physics": {"float_pct": 0.0}})
+    header, row = table.splitlines()
+    assert header.split()[-2:] == ["kinematic", "physics"]
+    assert row.split()[-2:] == ["12.5", "0"]
+
+
+def test_write_outputs_writes_every_file(tmp_path):
+    folder = save_result(tmp_path, num_frames=6)
+    video = write_video(tmp_path / "clip.mp4", num_frames=6, fps=25.0)
+    written = write_outputs(folder, video=video, formats=("bvh", "csv"),
+                            report=report.BUNDLE.is_file(), progress=False)
+    expected = {"metrics", "overlay", "overlay_png", "bvh", "csv"} | (
+        {"report"} if report.BUNDLE.is_file() else set())
+    assert set(written) == expected
+    assert all(p.parent == folder and p.stat().st_size > 0 for p in written.values())
+    stored = json.loads(written["metrics"].read_text())
+    assert stored == summarize(folder)
+    meta = Reconstruction.load(folder).meta
+    assert meta["metrics"] == stored and meta["image_size"] == [320, 240]
+    if "report" in written:
+        page = written["report"].read_text()
+        assert METRIC_LABELS["foot_skate_pct"] in page
+
+
+def test_kinematic_only_result_has_no_physics_column(tmp_path):
+    folder = save_result(tmp_path, num_frames=5, physics=False)
+    written = write_outputs(folder, formats=("csv",), report=False, overlay=False)
+    assert set(json.loads(written["metrics"].read_text())) == {"kinematic"}
+
+
+def test_unknown_format_is_refused_before_writing(tmp_path):
+    folder = save_result(tmp_path, num_frames=4)
+    with pytest.raises(PhysposeError, match="unknown export format"):
+        write_outputs(folder, formats=("fbx",))
+    assert not (folder / "metrics.json").exists()
+
+
+def test_missing_result_folder(tmp_path):
+    with pytest.raises(PhysposeError, match="result folder not found"):
+        summarize(tmp_path / "nope")
