@@ -163,3 +163,49 @@ def test_reconstruct_end_to_end_on_a_short_clip(pose2sim_demo, tmp_path, capsys)
     metrics = json.loads((out / "metrics.json").read_text())
     assert set(metrics) == {"kinematic", "physics"}
     assert metrics["kinematic"]["mpjpe_2d_px"] < 30.0
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["observe", "{missing}.mp4", "--out", "{out}"], "file not found"),
+    (["fit", "{missing}.mp4", "--out", "{out}"], "file not found"),
+    (["body", "--height", "9", "--out", "{out}"], "outside 0.5-2.5 m"),
+    (["export", "{missing}", "-f", "csv"], "result folder not found"),
+])
+def test_other_subcommands_refuse_bad_input(tmp_path, capsys, argv, message):
+    where = {"missing": tmp_path / "nope", "out": tmp_path / "out"}
+    assert main([a.format(**where) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_unknown_export_format_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["export", str(tmp_path), "-f", "fbx"])
+    assert done.value.code == 2 and "invalid choice: 'fbx'" in capsys.readouterr().err
+
+
+def test_demo_still_writes_the_kinematic_outputs_when_dynamics_fails(tmp_path, monkeypatch,
+                                                                     capsys):
+    import physpose.cli.demo as demo
+    import physpose.pipeline as pipeline
+
+    def failing_reconstruct(*args, **kwargs):
+        raise RuntimeError("simulated blow-up")
+
+    def kinematic_only(obs, config, out):
+        rec = make_reconstruction(num_frames=5, physics=False)
+        rec.save(out / "reconstruction.npz")
+        return rec
+
+    monkeypatch.setattr(demo, "ensure_pose2sim_demo", lambda: tmp_path)
+    monkeypatch.setattr(demo, "load_input", lambda video, config, K: None)
+    monkeypatch.setattr(pipeline, "reconstruct", failing_reconstruct)
+    monkeypatch.setattr(demo, "_kinematic_only", kinematic_only)
+    out = tmp_path / "demo"
+    out.mkdir()
+    assert main(["demo", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "physics stage FAILED (RuntimeError: simulated blow-up)" in text
+    assert "kinematic motion only" in text and "report.html" in text
+    assert set(json.loads((out / "metrics.json").read_text())) == {"kinematic"}
+    assert (out / "overlay.mp4").stat().st_size > 0 and (out / "motion.bvh").is_file()
