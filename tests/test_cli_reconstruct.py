@@ -42,6 +42,7 @@ def _args(*argv: str):
     (["--camera", "{missing}.json"], "camera file not found"),
     (["--camera", "{bad_json}"], "cannot read camera intrinsics"),
     (["--camera", "{good_json}", "--camera-name", "cam01"], "applies to a Qualisys"),
+    (["--out", "{good_json}"], "exists and is not a folder"),
 ])
 def test_bad_input_gives_a_message_and_exit_2(clip, tmp_path, capsys, argv, message):
     (tmp_path / "bad.json").write_text('{"K": [[1, 2], [3]]}')

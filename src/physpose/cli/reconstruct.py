@@ -228,6 +228,9 @@ def run(args: argparse.Namespace) -> int:
     config = pipeline_config(args)
     image_size = check_input(args.video, config)
     check_person(args.height, args.mass)
+    if args.out.exists() and not args.out.is_dir():
+        raise PhysposeError("output path exists and is not a folder", path=args.out,
+                            remedy="pass a folder for --out")
     K = None if args.camera is None else camera_intrinsics(args.camera, args.camera_name,
                                                            args.video, image_size)
     timings: dict[str, float] = {}
