@@ -80,3 +80,14 @@ def test_missing_bundle_tells_the_user_to_run_setup(tmp_path, monkeypatch):
     monkeypatch.setattr(report, "BUNDLE", tmp_path / "absent.js")
     with pytest.raises(PhysposeError, match="make setup"):
         build_report(save_result(tmp_path, num_frames=3))
+
+
+def test_window_losses_read_the_dynamics_stage_windows():
+    """The dynamics stage writes terms_final, frames and a non-numeric 'start' (its init)."""
+    windows = [{"frames": [0, 25], "start": "inverse_dynamics", "terms_final": {"com": 0.2}},
+               {"frames": [15, 40], "start": "handover", "terms_final": {"com": 0.1}}]
+    spec = window_losses({"dynamics": {"windows": windows}}, fps=25.0)
+    assert spec["x"] == [0.0, 0.6] and spec["xlabel"] == "window start (s)"
+    assert spec["series"][0]["y"] == [0.2, 0.1]
+    no_fps = window_losses({"dynamics": {"windows": windows}})
+    assert no_fps["x"] == [0.0, 1.0] and no_fps["xlabel"] == "window"

@@ -88,35 +88,44 @@ def _plots(rec: Reconstruction, bodies: dict[str, BodyMotion | None]) -> list[di
         plots.append({"id": "gap", "title": "Physics vs kinematic (mean joint distance)",
                       "xlabel": "time (s)", "ylabel": "cm", "x": time, "cursor": True,
                       "series": [{"name": "distance", "y": _r(100 * gap), "color": "#444"}]})
-    losses = window_losses(rec.meta)
+    losses = window_losses(rec.meta, rec.fps)
     if losses is not None:
         plots.append(losses)
     return plots
 
 
-def window_losses(meta: dict) -> dict | None:
+def window_losses(meta: dict, fps: float | None = None) -> dict | None:
     """Plot spec of the per-term loss of each dynamics window, from meta['dynamics']['windows'].
 
-    Each window is a dict with its terms under 'terms' or 'losses' ({name: value}) and its
-    start time under 'start' (s; the window index when absent). Terms absent from a window
-    leave a gap; None when no window has any term.
+    Each window is a dict with its terms under 'terms_final' (as the dynamics stage writes
+    them), 'terms' or 'losses' ({name: value}); its start time is frames[0] / fps when the
+    window lists its frames, else a numeric 'start' (s), else the window index. Terms absent
+    from a window leave a gap; None when no window has any term.
     """
-    windows = (meta.get("dynamics") or {}).get("windows") or []
-    rows = [w.get("terms") or w.get("losses") or {} for w in windows if isinstance(w, dict)]
+    windows = [w for w in (meta.get("dynamics") or {}).get("windows") or [] if isinstance(w, dict)]
+    rows = [w.get("terms_final") or w.get("terms") or w.get("losses") or {} for w in windows]
     names = sorted({k for r in rows for k, v in r.items() if _finite(v)})
     if not names:
         return None
-    x = [float(w.get("start", i)) if isinstance(w, dict) else float(i)
-         for i, w in enumerate(windows)]
+    starts = [_window_start(w, fps) for w in windows]
+    has_start = all(s is not None for s in starts)
+    x = [s if has_start else float(i) for i, s in enumerate(starts)]
     series = [{"name": n, "y": [float(r[n]) if _finite(r.get(n)) else None for r in rows],
                "color": _TERM_COLORS[k % len(_TERM_COLORS)], "markers": True}
               for k, n in enumerate(names)]
     values = [v for s in series for v in s["y"] if v is not None]
     log = min(values) > 0 and max(values) / min(values) > _LOG_RANGE
-    has_start = all(isinstance(w, dict) and "start" in w for w in windows)
     return {"id": "losses", "title": "Loss per window and term" + (" (log)" if log else ""),
             "xlabel": "window start (s)" if has_start else "window", "ylabel": "loss",
             "x": x, "series": series, "log_y": log, "cursor": has_start}
+
+
+def _window_start(window: dict, fps: float | None) -> float | None:
+    """Start time (s) of a dynamics window, or None when it does not say."""
+    frames = window.get("frames")
+    if fps and isinstance(frames, list) and frames and _finite(frames[0]):
+        return float(frames[0]) / fps
+    return float(window["start"]) if _finite(window.get("start")) else None
 
 
 def _finite(v) -> bool:
