@@ -31,7 +31,7 @@ test-fast: setup
 	$(RUN) pytest -q -m "not slow"
 
 bench: setup
-	$(RUN) python benchmarks/run_all.py
+	$(RUN) physpose benchmark --out out/benchmark
 
 clean:
 	rm -rf out .cache
