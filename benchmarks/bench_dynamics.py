@@ -76,7 +76,8 @@ def main() -> None:
     one = dataclasses.replace(fit, qpos=fit.qpos[:window], joints=fit.joints[:window],
                               landmarks=fit.landmarks[:window])
     one_obs = obs.replace(keypoints2d=obs.keypoints2d[:window], timestamps=obs.timestamps[:window],
-                          detected=obs.detected[:window], interpolated=obs.interpolated[:window])
+                          detected=obs.detected[:window], interpolated=obs.interpolated[:window],
+                          world_landmarks=obs.world_landmarks[:window])
     start = time.perf_counter()
     res = optimize_dynamics(body, one, one_obs, paper, checkpoints=False, progress=False)
     wall = time.perf_counter() - start
