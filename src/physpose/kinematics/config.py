@@ -100,7 +100,7 @@ class GroundConfig:
     contact_height: float = 0.01      # m, +GT: soles this high weigh 1/e in the skate term
     sigma_skate: float = 0.1          # m/s, +GT: sole sliding speed scale
     roll_sigma_deg: float = 30.0      # prior: the camera's roll about its optical axis
-    balance_sigma_deg: float = 5.0    # prior: the mean support -> centre of mass direction
+    balance_sigma_deg: float = 3.0    # prior: the mean support -> centre of mass direction
     rounds: int = 1                   # (estimate T_g, re-fit poses) rounds
     level_percentile: float = 10.0    # no +G: % of frames whose lowest sole point is below z=0
 
