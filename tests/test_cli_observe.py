@@ -111,12 +111,3 @@ def test_video_end_to_end_then_cached(pose2sim_demo, tmp_path, capsys):
     assert len(list((tmp_path / "cache" / "observe").glob("*.npz"))) == 1
     assert main([*args, "--no-overlay"]) == 0  # second run: from the cache
     assert len(list((tmp_path / "cache" / "observe").glob("*.npz"))) == 1
-
-
-@pytest.mark.slow
-def test_demo_runs_and_says_where_the_files_are(pose2sim_demo, tmp_path, capsys):
-    out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out)]) == 0
-    text = capsys.readouterr().out
-    assert str(out.resolve()) in text and "overlay_landmarks.mp4" in text
-    assert Observations.load(out / "observations.npz").detected.mean() > 0.95
