@@ -1,14 +1,15 @@
 # physpose: `make demo` (install + run on the built-in clip), `make test` (install + tests).
 SHELL := /bin/bash
-UV := $(shell command -v uv 2>/dev/null || echo $(HOME)/.local/bin/uv)
+# uv from PATH, else the copy `pip install uv` puts beside python3 (run as `python3 -m uv`).
+UV := $(or $(shell command -v uv 2>/dev/null),python3 -m uv)
 RUN := $(UV) run --frozen
 
-.PHONY: setup web data demo test test-fast bench clean
+.PHONY: setup uv web data demo test test-fast bench clean
 
-$(UV):
-	python3 -m pip install --user --quiet "uv>=0.5" || python3 -m pip install --quiet "uv>=0.5"
+uv:
+	@$(UV) --version >/dev/null 2>&1 || python3 -m pip install --quiet "uv>=0.5"
 
-setup: $(UV) web
+setup: uv web
 	$(UV) sync --frozen
 	$(RUN) python -m physpose.demo_data
 
