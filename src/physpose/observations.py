@@ -14,6 +14,7 @@ import numpy as np
 
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
+from physpose.npz_io import read_npz, write_npz
 
 FORMAT_VERSION = 1
 
@@ -70,11 +71,7 @@ class Observations:
             value = getattr(self, key)
             if value is not None:
                 arrays[key] = value
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".partial.npz")
-        np.savez_compressed(tmp, **arrays)
-        tmp.replace(path)  # atomic: a crash never leaves a half-written file under the real name
-        return path
+        return write_npz(path, arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> "Observations":
@@ -82,12 +79,7 @@ class Observations:
         if not path.is_file():
             raise PhysposeError("observations file not found", path=path,
                                 remedy="run `physpose observe VIDEO --out DIR` first")
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                d = {k: data[k] for k in data.files}
-        except (OSError, ValueError) as exc:
-            raise PhysposeError(f"not a readable observations npz ({exc})", path=path,
-                                remedy="re-create it with `physpose observe`") from None
+        d = read_npz(path, what="observations", remedy="re-create it with `physpose observe`")
         missing = {"fps", "image_size", "timestamps", "keypoints2d", "detected",
                    "interpolated"} - d.keys()
         if missing:

@@ -14,6 +14,7 @@ import numpy as np
 
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
+from physpose.npz_io import read_npz, write_npz
 
 _REQUIRED = ("fps", "joint_names", "joints_kinematic", "camera_K", "camera_T_world2cam",
              "landmarks_kinematic", "keypoints2d")
@@ -86,11 +87,7 @@ class Reconstruction:
         if self.body_mjcf is not None:
             arrays["body_mjcf"] = np.array(self.body_mjcf)
         arrays["meta_json"] = np.array(json.dumps(self.meta, default=str))
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".partial.npz")
-        np.savez_compressed(tmp, **arrays)
-        tmp.replace(path)
-        return path
+        return write_npz(path, arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> "Reconstruction":
@@ -101,12 +98,7 @@ class Reconstruction:
             raise PhysposeError("reconstruction not found", path=path,
                                 remedy="pass a folder written by `physpose fit` or "
                                        "`physpose reconstruct`")
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                d = {k: data[k] for k in data.files}
-        except (OSError, ValueError) as exc:
-            raise PhysposeError(f"not a readable reconstruction npz ({exc})", path=path,
-                                remedy="re-run the reconstruction") from None
+        d = read_npz(path, what="reconstruction", remedy="re-run the reconstruction")
         missing = [k for k in _REQUIRED if k not in d]
         if missing:
             raise PhysposeError(f"reconstruction lacks keys {missing}", path=path,

@@ -1,0 +1,28 @@
+"""The project's npz files: atomic writes and reads whose failures tell the user what to do."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from physpose.cache import atomic_path
+from physpose.errors import PhysposeError
+
+
+def write_npz(path: str | Path, arrays: dict[str, np.ndarray]) -> Path:
+    """Write compressed arrays; a crash never leaves a half-written file under `path`."""
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        np.savez_compressed(tmp, **arrays)
+    return path
+
+
+def read_npz(path: str | Path, *, what: str, remedy: str) -> dict[str, np.ndarray]:
+    """All arrays of an npz file (allow_pickle=False); PhysposeError if it cannot be read."""
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            return {k: data[k] for k in data.files}
+    except (OSError, ValueError) as exc:
+        raise PhysposeError(f"not a readable {what} npz ({exc})", path=path,
+                            remedy=remedy) from None
