@@ -37,8 +37,8 @@ from physpose.dynamics.init import (Reference, geom_lowest, ground_motion, groun
 from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, make_reference)
 from physpose.dynamics.result import PhysicsResult
 from physpose.dynamics.rollout import SimModel, Simulator, Trajectories, make_state, sim_model
-from physpose.dynamics.spline import KnotGrid, fit_coefficients
-from physpose.dynamics.tracking import track
+from physpose.dynamics.spline import KnotGrid
+from physpose.dynamics.controller import ControllerGains, track_reference
 from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
                                        ranked_fitness, score, step_position)
 from physpose.errors import PhysposeError
@@ -65,8 +65,9 @@ class DynamicsConfig:
     an initial state hovering less than this is put down on the floor; ground_reference: do
     the same to every frame of the estimate before it gives the initial targets and the COM
     targets (a foot inside the floor would stub it; a sunken body asks for bent knees).
-    tracking_start: also simulate each window once with a balance feedback (tracking.py) and
-    start CMA-ES from its fitted targets when they score better than the inverse-dynamics ones.
+    tracking_start: also simulate each window once under the whole-body tracking controller
+    (controller.py, gains ``controller``) and, when its targets score better than the
+    inverse-dynamics ones, search spline offsets on top of them (exactly reproduced).
     retries, retry_distance: a sequential window whose result hands on a state with the COM
     more than retry_distance (m) from the estimate's is searched again (another seed, 1.5x the
     step size), at most retries times. reset_distance: if the kept result still hands on a COM
@@ -94,6 +95,7 @@ class DynamicsConfig:
     ground_snap: float = 0.03
     ground_reference: bool = True
     tracking_start: bool = False
+    controller: ControllerGains = field(default_factory=ControllerGains)
     retries: int = 2
     retry_distance: float = 0.15
     reset_distance: float = 0.3
@@ -229,11 +231,9 @@ def _problem(setup: _Setup, win: Window, coefs: np.ndarray, state0: np.ndarray,
                             start=coefs[free].copy(), positions=positions, history=history)
     if not cfg.tracking_start:
         return problem
-    feedforward = problem.ctrl(problem.x0.reshape(1, -1))[0]
-    applied = track(setup.sim, state0, setup.reference, win.start_step, feedforward)
-    fitted = fit_coefficients(problem.basis, applied - problem.fixed_ctrl, ridge=1e-6,
-                              prior=problem.start)
-    return dataclasses.replace(problem, alternatives=(fitted[:, problem.dofs],))
+    _, tracked = track_reference(setup.sim.model, state0, setup.reference, win.start_step,
+                                 win.num_steps, cfg.controller)
+    return dataclasses.replace(problem, alternatives=(tracked,))
 
 
 def _cma(x0: np.ndarray, cfg: DynamicsConfig, seed: int) -> cma.CMAEvolutionStrategy:
@@ -308,23 +308,41 @@ class _Search:
                      terms={n: float(v[k]) for n, v in scores.terms.items()},
                      states=part.states[k].copy(), sensors=part.sensors[k].copy())
 
-    def run(self, seeds: list[int], label: str, progress: bool) -> tuple[list[_Best], list[dict]]:
+    def run(self, seeds: list[int], label: str, progress: bool, force_start: int | None = None
+            ) -> tuple[list[_Best], list[dict]]:
         """Search every problem; returns the best sample of each and its initial record.
+
+        The search starts from the best-scoring start guess, or from start ``force_start``
+        (0: the problem's own, k: its k-th alternative) where a problem has it.
 
         Each iteration also rolls out every strategy's current mean (not told to CMA-ES):
         the mean is the smoothest candidate and often the best.
         """
         frames = [len(p.positions) for p in self.problems]
-        starts = [np.stack([p.x0.ravel()] + [a.ravel() for a in p.alternatives])
-                  for p in self.problems]
+        # Start guesses: each problem's own start and its alternative start controls, one
+        # rollout each; the search goes on from the best (its problem replaces the original).
+        groups = [[p] + [p.starting_from(a) for a in p.alternatives] for p in self.problems]
+        flat = [c for g in groups for c in g]
+        problems, self.problems, self.evaluations = self.problems, flat, [0] * len(flat)
+        evaluated = self._evaluate([c.x0.reshape(1, -1) for c in flat])
+        self.problems = problems
+        self.evaluations = [0] * len(problems)
         best: list[_Best | None] = [None] * len(self.problems)
-        initial = []
-        for i, (x, (s, part)) in enumerate(zip(starts, self._evaluate(starts))):
-            best[i] = self._update(None, x, s, part, ranked_fitness(s, frames[i]))
-            initial.append({"loss": float(s.total[0]), "valid": bool(np.isfinite(s.total[0])),
-                            "terms": {n: float(v[0]) for n, v in s.terms.items()},
-                            "start": int(np.argmin(ranked_fitness(s, frames[i])))})
-        # CMA-ES starts from the better start guess (inverse dynamics, or tracking).
+        initial, row = [], 0
+        for i, group in enumerate(groups):
+            fitness = np.array([ranked_fitness(s, frames[i])[0] for s, _ in
+                                evaluated[row:row + len(group)]])
+            k = int(np.argmin(fitness))
+            if force_start is not None and force_start < len(group):
+                k = force_start
+            s, part = evaluated[row + k]
+            self.problems[i] = group[k]
+            self.evaluations[i] = len(group)
+            best[i] = self._update(None, group[k].x0.reshape(1, -1), s, part, fitness[k:k + 1])
+            s0 = evaluated[row][0]
+            initial.append({"loss": float(s0.total[0]), "valid": bool(np.isfinite(s0.total[0])),
+                            "terms": {n: float(v[0]) for n, v in s0.terms.items()}, "start": k})
+            row += len(group)
         strategies = [_cma(b.x, self.cfg, seed) for b, seed in zip(best, seeds)]
         bar = tqdm(total=self.cfg.iterations, desc=label, disable=not progress, file=sys.stderr,
                    leave=False, dynamic_ncols=True)
@@ -375,27 +393,32 @@ def _handover_error(setup: _Setup, best: _Best, win: Window, step_end: int) -> f
 
 def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _Setup,
                          cfg: DynamicsConfig, timing: dict, w: int, step_end: int, label: str,
-                         progress: bool) -> tuple[_Best, dict, int]:
-    """Search a window; while its best sample hands the next window a state whose COM is more
+                         progress: bool) -> tuple[WindowProblem, _Best, dict, int]:
+    """Search a window (returns the problem as searched: with its chosen start); while its best sample hands the next window a state whose COM is more
     than ``retry_distance`` from the estimate's (a fall in the making) or is invalid, search
     again with another seed and a larger step size, up to ``retries`` times. Keeps the attempt
     with the smallest handover error."""
-    chosen, evaluations = None, 0
+    chosen, evaluations, first_start = None, 0, None
     for attempt in range(cfg.retries + 1):
         attempt_cfg = dataclasses.replace(cfg, sigma0=cfg.sigma0 * 1.5 ** attempt)
         search = _Search([problem], simulator, setup, attempt_cfg, timing)
+        # The first retry of a window with two start guesses goes on from the other one: the
+        # better-scoring start can still be the one heading for a fall.
+        force = 1 - first_start if attempt == 1 and problem.alternatives else None
         (best,), (initial,) = search.run([_window_seed(cfg.seed + 7919 * attempt, w)],
                                          label + (f" retry {attempt}" if attempt else ""),
-                                         progress)
+                                         progress, force_start=force)
+        if attempt == 0:
+            first_start = initial["start"]
         evaluations += search.evaluations[0]
         error = _handover_error(setup, best, problem.window, step_end) if best.valid else np.inf
-        if chosen is None or error < chosen[2]:
-            chosen = (best, initial, error)
+        if chosen is None or error < chosen[3]:
+            chosen = (search.problems[0], best, initial, error)
         if error <= cfg.retry_distance:
             break
-    best, initial, error = chosen
+    searched, best, initial, error = chosen
     initial = dict(initial, attempts=attempt + 1, handover_error=error)
-    return best, initial, evaluations
+    return searched, best, initial, evaluations
 
 
 def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, folder: Path | None,
@@ -417,7 +440,7 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             first_free = setup.grid.started_before(win.start_step * setup.sim.dt) \
                 if w and not reset else 0
             problem = _problem(setup, win, coefs, state, first_free, history, cfg)
-            best, initial, evaluations = _search_with_retries(
+            problem, best, initial, evaluations = _search_with_retries(
                 problem, simulator, setup, cfg, timing, w, step_end,
                 f"dynamics window {w + 1}/{len(wins)}", progress)
             coefs = coefs.copy()
@@ -471,7 +494,7 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
         for i, w in enumerate(group):
             win, best = wins[w], bests[i]
             out = _frame_outputs(setup, best, win, win.frames)
-            ctrl = problems[i].ctrl(best.x[None])[0]
+            ctrl = search.problems[i].ctrl(best.x[None])[0]
             record = _record(win, best, initials[i], search.evaluations[i], seconds, cfg.weights)
             arrays = {"ctrl": ctrl, **out}
             if folder is not None:

@@ -8,6 +8,7 @@ after its last one.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -85,7 +86,7 @@ class WindowProblem:
     start: np.ndarray
     positions: np.ndarray
     history: np.ndarray | None
-    alternatives: tuple[np.ndarray, ...] = ()  # other start guesses (nfree, ndofs)
+    alternatives: tuple[np.ndarray, ...] = ()  # other start guesses: servo targets (S, 48)
 
     @property
     def x0(self) -> np.ndarray:
@@ -101,6 +102,12 @@ class WindowProblem:
     def ctrl(self, x: np.ndarray) -> np.ndarray:
         """Servo targets (B, S, 48) for flat search vectors x (B, nfree * ndofs)."""
         return self.fixed_ctrl + np.matmul(self.basis, self.coefficients(x))
+
+    def starting_from(self, ctrl: np.ndarray) -> WindowProblem:
+        """The same search with its start x0 giving exactly the servo targets ctrl (S, 48):
+        the search then varies spline offsets on top of them."""
+        shift = np.asarray(ctrl, dtype=float) - self.ctrl(self.x0.reshape(1, -1))[0]
+        return dataclasses.replace(self, fixed_ctrl=self.fixed_ctrl + shift, alternatives=())
 
 
 @dataclass(frozen=True, eq=False)
