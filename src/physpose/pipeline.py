@@ -42,7 +42,7 @@ class PipelineConfig:
     kinematics: KinematicConfig = field(default_factory=KinematicConfig)
     body: BodyConfig = field(default_factory=BodyConfig)
     scene: SceneConfig = field(default_factory=SceneConfig)
-    dynamics: DynamicsConfig = field(default_factory=DynamicsConfig)
+    dynamics: DynamicsConfig = field(default_factory=lambda: DYNAMICS_PRESETS["fast"])
 
     @classmethod
     def preset(cls, name: str = "fast", **changes) -> PipelineConfig:
