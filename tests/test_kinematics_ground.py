@@ -39,7 +39,10 @@ def test_tilted_floor_is_recovered(tilt_deg, roll_deg):
     n_true = R @ np.array([0.0, 0.0, 1.0])
     angle = np.degrees(np.arccos(np.clip(plane[:3] @ n_true, -1.0, 1.0)))
     assert angle < 1.5, angle
-    assert abs(plane[3] - centre[2]) < 0.05, plane[3]  # camera height above the floor
+    # Camera height above the floor: within 6 cm (2.4 %); the depth gain, free here although
+    # the depths are exact, trades a little of it (3.5 -> 5.8 cm at 40 degrees) for robustness
+    # to real depth errors (test_plane_tolerates_monocular_depth_errors).
+    assert abs(plane[3] - centre[2]) < 0.06, plane[3]
 
 
 def test_level_guess_puts_the_feet_on_the_floor():
@@ -68,3 +71,31 @@ def test_world_frame_of_a_plane():
     assert np.allclose(o_world[:2], 0.0) and o_world[2] > 0
     forward_world = T_inv[:3, :3] @ np.array([0.0, 0.0, 1.0])
     assert forward_world[0] > 0.9 and abs(forward_world[1]) < 1e-9
+
+
+@pytest.mark.parametrize("depth_slope", [0.75, 1.3])
+def test_plane_tolerates_monocular_depth_errors(depth_slope):
+    """Monocular depth is off by a few per cent per frame, and the errors grow with the
+    distance (estimated depth = mean + slope x (true - mean); slopes of 0.65-1.4 were measured
+    on the pose2sim views). Feet placed at the wrong depth along their rays would tilt a plane
+    fitted to them by ~5 degrees here; the fitted depth gain (depth_gain_sigma) absorbs it."""
+    shape = BodyShape.from_height(1.7)
+    q = walking_qpos(shape, 40, heading_deg=90.0)
+    level = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    R = Rotation.from_euler("x", -25.0, degrees=True).as_matrix() @ level
+    centre = np.array([0.5, -4.0, 2.0])
+    surface, points, com = _posed_points(shape, q, R, -R @ centre)
+    depth = np.linalg.norm(com, axis=-1)
+    factor = 1.0 + (depth_slope - 1.0) * (depth - depth.mean()) / depth  # along each ray
+    points, com = points * factor[:, None, None], com * factor[:, None]
+    n_true = R @ np.array([0.0, 0.0, 1.0])
+
+    def angle(cfg):
+        plane, _ = estimate_plane(points, surface.left_foot, surface.right_foot, com, cfg)
+        return np.degrees(np.arccos(np.clip(plane[:3] @ n_true, -1.0, 1.0))), plane[3]
+
+    rigid, _ = angle(GroundConfig(depth_gain_sigma=0.0))
+    tolerant, height = angle(GroundConfig())
+    assert rigid > 3.0, rigid  # the errors matter
+    assert tolerant < 1.5, tolerant
+    assert abs(height - centre[2]) < 0.1, height

@@ -16,7 +16,7 @@ from physpose.kinematics.config import KinematicConfig
 from physpose.kinematics.evidence import gather_evidence, padded_length, seed_frames
 from physpose.kinematics.ik import inverse_kinematics
 from physpose.kinematics.losses import rotvec_matrix
-from physpose.kinematics.swaps import GROUPS, swap_states, unswap
+from physpose.kinematics.swaps import GROUPS, swap_paths, unswap
 from physpose.reconstruction import Reconstruction
 from physpose.shape import BodyShape
 from physpose.skeleton import DOF_LIMITS, DOF_NAMES, NUM_DOF
@@ -47,22 +47,52 @@ def test_rotation_vector_matrix():
                        atol=1e-9)
 
 
-def test_swaps_are_found_and_undone():
+def _swapped(ev, rows, parts):
+    """The evidence with the left/right labels of `parts` exchanged in `rows` (2d and 3d)."""
+    left = [LANDMARK_INDEX[f"left_{p}"] for p in parts]
+    right = [LANDMARK_INDEX[f"right_{p}"] for p in parts]
+    out = {}
+    for name in ("uv", "world_ray"):
+        a = getattr(ev, name).copy()
+        a[np.ix_(rows, left)], a[np.ix_(rows, right)] = (getattr(ev, name)[np.ix_(rows, right)],
+                                                         getattr(ev, name)[np.ix_(rows, left)])
+        out[name] = a
+    return type(ev)(**{**ev.__dict__, **out})
+
+
+@pytest.fixture(scope="module")
+def walk_evidence():
     clip = synthetic_clip(frames=30)
-    K = clip.K
-    ev = gather_evidence(clip.observations, K, 0.1, True)
-    swapped = ev.uv.copy()
-    left = [LANDMARK_INDEX[f"left_{p}"] for p in GROUPS["legs"]]
-    right = [LANDMARK_INDEX[f"right_{p}"] for p in GROUPS["legs"]]
+    return gather_evidence(clip.observations, clip.K, 0.1, True)
+
+
+def test_swaps_are_found_and_undone(walk_evidence):
+    ev = walk_evidence
     rows = np.arange(11, 15)
-    swapped[np.ix_(rows, left)], swapped[np.ix_(rows, right)] = (
-        ev.uv[np.ix_(rows, right)], ev.uv[np.ix_(rows, left)])
-    bad = type(ev)(**{**ev.__dict__, "uv": swapped})
-    states = swap_states(bad, GROUPS["legs"])
-    assert np.array_equal(np.flatnonzero(states), rows)
-    assert not swap_states(ev, GROUPS["legs"]).any()
-    assert not swap_states(ev, GROUPS["arms"]).any()
-    assert np.allclose(unswap(bad).uv, ev.uv)
+    bad = _swapped(ev, rows, GROUPS["legs"])
+    states = swap_paths(bad)
+    assert np.array_equal(np.flatnonzero(states["legs"]), rows)
+    assert not states["arms"].any() and not states["trunk"].any()
+    assert not any(s.any() for s in swap_paths(ev).values())
+    repaired = unswap(bad)
+    assert np.allclose(repaired.uv, ev.uv) and np.allclose(repaired.world_ray, ev.world_ray)
+
+
+def test_legs_swapped_in_most_frames_are_repaired(walk_evidence):
+    """Which of the two mirror-image labellings of the legs is right follows from the trunk
+    (knees nearer their own hips), not from which one the detector gave more often."""
+    rows = np.arange(4, 24)  # 20 of 30 frames
+    states = swap_paths(_swapped(walk_evidence, rows, GROUPS["legs"]))
+    assert np.array_equal(np.flatnonzero(states["legs"]), rows)
+    assert not states["arms"].any() and not states["trunk"].any()
+
+
+def test_whole_body_flips_are_repaired(walk_evidence):
+    rows = np.array([8, 9, 10, 11, 12, 20, 21])
+    everything = tuple(p for parts in GROUPS.values() for p in parts)
+    states = swap_paths(_swapped(walk_evidence, rows, everything))
+    for name in GROUPS:
+        assert np.array_equal(np.flatnonzero(states[name]), rows), name
 
 
 def test_seed_frames_pick_confident_spread_frames():

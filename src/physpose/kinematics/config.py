@@ -101,6 +101,7 @@ class GroundConfig:
     sigma_skate: float = 0.1          # m/s, +GT: sole sliding speed scale
     roll_sigma_deg: float = 30.0      # prior: the camera's roll about its optical axis
     balance_sigma_deg: float = 3.0    # prior: the mean support -> centre of mass direction
+    depth_gain_sigma: float = 0.4     # plane fit: prior of g, depth errors = g x relative depth
     rounds: int = 1                   # (estimate T_g, re-fit poses) rounds
     level_percentile: float = 10.0    # no +G: % of frames whose lowest sole point is below z=0
 

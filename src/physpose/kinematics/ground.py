@@ -10,6 +10,13 @@ above its support, the centroid of the lowest surface points) and a weak one tha
 roll about its optical axis is small. The plane is searched from several starts (the level
 camera's up, the mean balance direction, the normal of the lowest foot points) and the best
 minimum wins.
+
+Monocular depth errors are correlated with the distance: on the pose2sim views the estimated
+depth varies 0.65-1.4 x as much as the true one. Feet at the wrong depth along their rays
+tilt the plane towards or away from the camera (4 degrees there, which moved the camera height
+by 15 %). So the plane fit also estimates that gain: frame t's body is scaled about the camera
+centre (moved along its rays, so its image stays the same) by exp(g u_t), u_t its relative
+distance from the clip's mean distance, with a Gaussian prior on g (`depth_gain_sigma`).
 """
 
 from __future__ import annotations
@@ -32,6 +39,7 @@ _GP_SCALE = 0.02  # m: L_gp is divided by this, so a 2 cm change weighs like one
 class PlaneParams(NamedTuple):
     tilt: np.ndarray    # (2,) normal = normalise(n0 + tilt[0] e1 + tilt[1] e2)
     offset: np.ndarray  # () d in n . x + d = 0
+    depth_gain: np.ndarray  # () frame t scaled about the camera centre by exp(gain * u_t)
 
 
 def _basis(n0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -51,15 +59,16 @@ _SUPPORT_BAND = 0.03  # m: surface points this close to the lowest one form the 
 _MAX_ROUNDS = 3       # restarts of the plane fit from its own result
 
 
-def _plane_loss(p: PlaneParams, n0, e1, e2, points, weight, left, right, balance, roll_sigma,
-                balance_sigma, *, k, delta, body_weight):
+def _plane_loss(p: PlaneParams, n0, e1, e2, points, weight, left, right, balance, depth_u,
+                roll_sigma, balance_sigma, gain_sigma, *, k, delta, body_weight):
     n = _normal(p.tilt, n0, e1, e2)
-    dist = points @ n + p.offset                                   # (T, P)
+    dist = jnp.exp(p.depth_gain * depth_u)[:, None] * (points @ n) + p.offset   # (T, P)
     per = (ground_term(dist[:, left], k, delta) + ground_term(dist[:, right], k, delta)
            + body_weight * ground_term(dist, k, delta)) / _GP_SCALE
     roll = jnp.arctan2(n[0], -n[1])
     lean = 2.0 * (1.0 - balance @ n) / balance_sigma ** 2
-    return jnp.sum(weight * (per + lean)) / jnp.sum(weight) + (roll / roll_sigma) ** 2
+    return (jnp.sum(weight * (per + lean)) / jnp.sum(weight) + (roll / roll_sigma) ** 2
+            + (p.depth_gain / gain_sigma) ** 2)
 
 
 _plane_value_and_grad = jax.jit(jax.value_and_grad(_plane_loss),
@@ -103,21 +112,29 @@ def estimate_plane(points: np.ndarray, left: np.ndarray, right: np.ndarray, com:
     mean = balance.mean(axis=0)
     starts = [UP_LEVEL, mean / np.linalg.norm(mean)]
     starts.append(_lowest_foot_normal(points, feet, starts[1]))
-    best = None
-    for n0 in starts:
-        n, value = n0, np.inf
-        # The support (hence the balance directions) depends on the normal, and L-BFGS stops
-        # at the kinks of the k-smallest selection: restart from each result while it improves.
-        for _ in range(_MAX_ROUNDS):
-            v, n_new, d = _fit_plane(points, left, right, balance_directions(points, com, n),
-                                     n, cfg)
-            if v > value - 1e-6:
-                break
-            value, n = v, n_new
-            if best is None or value < best[0]:
-                best = (value, n, d)
+    best = min((_descend(points, left, right, com, n0, cfg) for n0 in starts),
+               key=lambda r: r[0])
     value, n, d = best
     return np.concatenate([n, [d]]), value
+
+
+def relative_depth(points: np.ndarray) -> np.ndarray:
+    """(T,) u_t = (r_t - mean r) / mean r, r_t the distance of frame t's centroid (camera axes)."""
+    r = np.linalg.norm(np.asarray(points).mean(axis=1), axis=-1)
+    return (r - r.mean()) / r.mean()
+
+
+def _descend(points, left, right, com, n0, cfg: GroundConfig) -> tuple[float, np.ndarray, float]:
+    """(loss, normal, offset) of the plane fit from n0. The support (hence the balance
+    directions) depends on the normal, and L-BFGS stops at the kinks of the k-smallest
+    selection: restart from each result while it improves."""
+    best, n = (np.inf, n0, 0.0), n0
+    for _ in range(_MAX_ROUNDS):
+        v, n_new, d = _fit_plane(points, left, right, balance_directions(points, com, n), n, cfg)
+        if v > best[0] - 1e-6:
+            break
+        best, n = (v, n_new, d), n_new
+    return best
 
 
 def _fit_plane(points, left, right, balance, n0, cfg: GroundConfig):
@@ -129,14 +146,17 @@ def _fit_plane(points, left, right, balance, n0, cfg: GroundConfig):
     weight[:len(points)] = 1.0
     args = tuple(jnp.asarray(a) for a in (  # on the device once, not at every evaluation
         n0, e1, e2, pad(points, length), weight, np.flatnonzero(left), np.flatnonzero(right),
-        pad(balance, length), np.radians(cfg.roll_sigma_deg), np.radians(cfg.balance_sigma_deg)))
+        pad(balance, length), pad(relative_depth(points), length),
+        np.radians(cfg.roll_sigma_deg), np.radians(cfg.balance_sigma_deg),
+        max(cfg.depth_gain_sigma, 1e-6)))
 
     def value_and_grad(p: PlaneParams):
         return _plane_value_and_grad(p, *args, k=cfg.k, delta=cfg.delta,
                                      body_weight=cfg.body_weight)
 
-    res = minimize(value_and_grad, PlaneParams(np.zeros(2), np.asarray(d0)),
-                   ("tilt", "offset"), iterations=200)
+    free = ("tilt", "offset") + (("depth_gain",) if cfg.depth_gain_sigma > 0 else ())
+    res = minimize(value_and_grad, PlaneParams(np.zeros(2), np.asarray(d0), np.asarray(0.0)),
+                   free, iterations=200)
     n = np.asarray(_normal(res.params.tilt, n0, e1, e2))
     return res.value, n, float(res.params.offset)
 

@@ -1,28 +1,44 @@
-"""Undo left/right limb swaps of the detector by temporal continuity (a two-state Viterbi).
+"""Undo left/right swaps of the detector (a Viterbi over labellings).
 
-Pose detectors now and then label the left leg (or arm) as the right one for a few frames.
-Both labellings are anatomically plausible, so one frame cannot tell which is right; the motion
-can: for each limb group the labelling sequence is chosen that moves the group's landmarks
-least between frames (2d, hip-centred, in units of the person's torso length), with a cost per
-switch, and of the two mirror-image sequences the one that keeps the detector's labels in more
-frames. Swapped frames exchange the left and right landmarks (2d, 3d and confidences).
+Pose detectors now and then label the left leg (or arm) as the right one for a few frames, or
+flip the labels of the whole body at once (front/back confusion, e.g. while the person turns).
+The landmarks with a side form three groups: legs, arms and the rest (trunk and face). A
+frame's state says which groups are exchanged (2^3 states); the Viterbi path minimises
+- motion: how far the landmarks move between frames (2d, hip-centred, per torso length), each
+  landmark's squared motion saturating at MOTION_CAP so an outlier detection cannot force a swap;
+- attachment: a limb's labels relative to the trunk's cost the excess length of the knees'
+  (elbows') distances to the hips (shoulders) of their own side over the crossed ones, in
+  MediaPipe's 3d. This is what decides the legs, whose left and right cross each other in the
+  image while walking, and it fixes which limb labelling of the two mirror images is right;
+- a cost per swap event, an event exchanging one limb group or the whole body, so a clear
+  whole-body flip seen on the arms carries the legs and the trunk along.
+The labelling as a whole (all groups exchanged in every frame) is a mirror image with the same
+cost; of the two, the one keeping the trunk's detected labels in more frames wins. Swapped
+frames exchange the left and right landmarks (2d, 3d and confidences).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import numpy as np
 
-from physpose.joints import LANDMARK_INDEX
+from physpose.joints import LANDMARK_INDEX, LANDMARK_NAMES
 from physpose.kinematics.evidence import Evidence
 
 GROUPS: dict[str, tuple[str, ...]] = {
     "legs": ("knee", "ankle", "heel", "foot_index"),
     "arms": ("elbow", "wrist", "pinky", "index", "thumb"),
 }
-SWITCH_COST = 4.0     # cost of a change of labelling, in units of the squared motion below
+GROUPS["trunk"] = tuple(n[5:] for n in LANDMARK_NAMES if n.startswith("left_")
+                        and n[5:] not in GROUPS["legs"] + GROUPS["arms"])
+EVENTS = (("legs",), ("arms",), tuple(GROUPS))  # what the detector swaps at once
+ATTACH = {"legs": ("knee", "hip"), "arms": ("elbow", "shoulder")}  # limb joint, its root
+SWITCH_COST = 4.0     # cost of a swap event, in units of the squared motion below
 MOTION_SIGMA = 0.25   # torso lengths: typical landmark motion between frames at ~25 fps
+MOTION_CAP = 9.0      # a landmark's (motion / sigma)^2 saturates towards this: c/(1 + c/cap)
+ATTACH_SIGMA = 0.02   # m of excess limb-to-root distance per unit cost
 
 
 def _pairs(parts: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -40,47 +56,92 @@ def _normalised_2d(ev: Evidence) -> np.ndarray:
     return (ev.uv - hip[:, None]) / max(scale, 1e-6)
 
 
-def swap_states(ev: Evidence, parts: tuple[str, ...], fps_ref: float = 25.0) -> np.ndarray:
-    """(T,) bool: frames whose left/right labels of `parts` should be exchanged."""
+def _motion_costs(ev: Evidence, parts: tuple[str, ...], fps_ref: float) -> np.ndarray:
+    """(T, 2, 2) cost of the move from the previous frame with evidence (state i, 1 =
+    exchanged) to this frame (state j); zero where either frame has no evidence."""
     left, right = _pairs(parts)
     x = _normalised_2d(ev)
-    a = np.concatenate([x[:, left], x[:, right]], axis=1)     # labels as given
-    b = np.concatenate([x[:, right], x[:, left]], axis=1)     # labels exchanged
+    states = (np.concatenate([x[:, left], x[:, right]], axis=1),     # labels as given
+              np.concatenate([x[:, right], x[:, left]], axis=1))     # labels exchanged
     w = np.concatenate([ev.weight[:, left], ev.weight[:, right]], axis=1)
     sigma = MOTION_SIGMA * fps_ref / ev.fps
-    states = (a, b)
-    t_count = len(x)
-    cost = np.zeros((t_count, 2))
-    back = np.zeros((t_count, 2), dtype=int)
-    last = 0  # the latest frame with evidence
-    for t in range(1, t_count):
-        if not ev.valid[t]:
-            cost[t], back[t] = cost[t - 1], (0, 1)
-            continue
-        if not ev.valid[last]:
-            last = t
-            cost[t], back[t] = cost[t - 1], (0, 1)
-            continue
-        gap = t - last
+    cost = np.zeros((len(x), 2, 2))
+    good = np.flatnonzero(ev.valid)
+    for last, t in zip(good[:-1], good[1:]):
         wt = np.minimum(w[t], w[last])
-        trans = np.empty((2, 2))
-        for i in range(2):
-            for j in range(2):
-                d2 = np.sum((states[j][t] - states[i][last]) ** 2, axis=-1) / (sigma * gap) ** 2
-                trans[i, j] = np.sum(wt * d2) / max(wt.sum(), 1e-9) * len(wt)
-                trans[i, j] += SWITCH_COST * (i != j)
-        total = cost[t - 1][:, None] + trans
+        for i, j in itertools.product(range(2), range(2)):
+            d2 = np.sum((states[j][t] - states[i][last]) ** 2, axis=-1) / (sigma * (t - last)) ** 2
+            d2 = d2 / (1.0 + d2 / MOTION_CAP)
+            cost[t, i, j] = np.sum(wt * d2) / max(wt.sum(), 1e-9) * len(wt)
+    return cost
+
+
+def _attachment_costs(ev: Evidence, group: str) -> np.ndarray:
+    """(T, 2) cost of a limb group's labels relative to the trunk's, as detected (column 0)
+    or exchanged (1): the excess of the limb-to-root distances (knee - hip, elbow - shoulder,
+    MediaPipe's 3d) over those of the other labelling, / ATTACH_SIGMA, x confidence."""
+    joint, root = ATTACH[group]
+    x = ev.world_ray
+    jl, jr = x[:, LANDMARK_INDEX[f"left_{joint}"]], x[:, LANDMARK_INDEX[f"right_{joint}"]]
+    rl, rr = x[:, LANDMARK_INDEX[f"left_{root}"]], x[:, LANDMARK_INDEX[f"right_{root}"]]
+    keep = np.linalg.norm(jl - rl, axis=-1) + np.linalg.norm(jr - rr, axis=-1)
+    cross = np.linalg.norm(jl - rr, axis=-1) + np.linalg.norm(jr - rl, axis=-1)
+    names = [f"{side}_{n}" for side in ("left", "right") for n in (joint, root)]
+    w = ev.weight[:, [LANDMARK_INDEX[n] for n in names]].min(axis=1)
+    excess = (keep - cross) / ATTACH_SIGMA * w
+    return np.stack([np.maximum(excess, 0.0), np.maximum(-excess, 0.0)], axis=1)
+
+
+def _event_counts(groups: tuple[str, ...]) -> np.ndarray:
+    """(S,) the fewest swap events (EVENTS) whose combination exchanges exactly the groups of
+    each change pattern (bit g of the index = group g changes); inf if none does."""
+    masks = [sum(1 << groups.index(g) for g in event if g in groups) for event in EVENTS]
+    counts = np.full(1 << len(groups), np.inf)
+    for chosen in itertools.product((0, 1), repeat=len(masks)):
+        pattern = 0
+        for use, mask in zip(chosen, masks):
+            pattern ^= mask * use
+        counts[pattern] = min(counts[pattern], sum(chosen))
+    return counts
+
+
+def swap_paths(ev: Evidence, groups: tuple[str, ...] = tuple(GROUPS), fps_ref: float = 25.0
+               ) -> dict[str, np.ndarray]:
+    """Group name -> (T,) bool: frames whose left/right labels of that group (GROUPS) should
+    be exchanged, decided jointly for the groups (see the module docstring)."""
+    motion = [_motion_costs(ev, GROUPS[g], fps_ref) for g in groups]
+    n_states = 1 << len(groups)
+    bits = (np.arange(n_states)[:, None] >> np.arange(len(groups))) & 1     # (S, G)
+    switch = SWITCH_COST * _event_counts(groups)[np.bitwise_xor.outer(
+        np.arange(n_states), np.arange(n_states))]                         # (S, S)
+    t_count = ev.num_frames
+    emit = np.zeros((t_count, n_states))
+    if "trunk" in groups:
+        for g, name in enumerate(groups):
+            if name in ATTACH:
+                relative = bits[:, g] ^ bits[:, groups.index("trunk")]
+                emit += _attachment_costs(ev, name)[:, relative]
+    cost = np.zeros((t_count, n_states))
+    cost[0] = emit[0]
+    back = np.zeros((t_count, n_states), dtype=int)
+    back[0] = np.arange(n_states)
+    for t in range(1, t_count):
+        trans = switch + sum(m[t][bits[:, g][:, None], bits[:, g][None, :]]
+                             for g, m in enumerate(motion))
+        total = cost[t - 1][:, None] + trans + emit[t][None, :]
         back[t] = np.argmin(total, axis=0)
-        cost[t] = total[back[t], [0, 1]]
-        last = t
+        cost[t] = total[back[t], np.arange(n_states)]
     path = np.zeros(t_count, dtype=int)
     path[-1] = int(np.argmin(cost[-1]))
     for t in range(t_count - 1, 0, -1):
         path[t - 1] = back[t, path[t]]
-    swapped = path.astype(bool)
-    if swapped[ev.valid].mean() > 0.5:  # the mirror sequence keeps more of the detector's labels
-        swapped = ~swapped
-    return swapped & ev.valid
+    swapped = bits[path].astype(bool)                                     # (T, G)
+    # Exchanging every group in every frame costs the same (a mirror image): keep the path
+    # under which the trunk keeps more of its detected labels (without a trunk group, there
+    # are no attachment costs, and each group is decided alone).
+    judge = [groups.index("trunk")] * len(groups) if "trunk" in groups else range(len(groups))
+    return {name: (swapped[:, g] ^ (swapped[ev.valid, j].mean() > 0.5)) & ev.valid
+            for g, (name, j) in enumerate(zip(groups, judge))}
 
 
 def _exchange(values: np.ndarray, rows: np.ndarray, left: np.ndarray, right: np.ndarray
@@ -94,10 +155,10 @@ def _exchange(values: np.ndarray, rows: np.ndarray, left: np.ndarray, right: np.
 def unswap(ev: Evidence) -> Evidence:
     """Evidence with the detected limb swaps undone (see the module docstring)."""
     uv, weight, world = ev.uv, ev.weight, ev.world_ray
-    for parts in GROUPS.values():
-        rows = np.flatnonzero(swap_states(ev, parts))
+    for name, swapped in swap_paths(ev).items():
+        rows = np.flatnonzero(swapped)
         if rows.size:
-            left, right = _pairs(parts)
+            left, right = _pairs(GROUPS[name])
             uv = _exchange(uv, rows, left, right)
             weight = _exchange(weight, rows, left, right)
             world = _exchange(world, rows, left, right)
