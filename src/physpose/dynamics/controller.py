@@ -35,12 +35,10 @@ import mujoco
 import numpy as np
 from scipy.optimize import lsq_linear
 
-from physpose.dynamics.init import Reference
+from physpose.dynamics.init import FRICTION_EDGES, Reference, friction_pyramid
 from physpose.errors import PhysposeError
 from physpose.skeleton import NUM_DOF
 
-_FRICTION_EDGES = 4
-_CONE_MARGIN = 0.8
 _FORCE_REGULARISER = 1e-3    # (per N): picks the smallest of equal force distributions
 _ROOT_EQUATION_WEIGHT = 1e2   # the root's equations of motion are (nearly) hard constraints
 
@@ -73,15 +71,6 @@ class ControllerGains:
     def pd(self, frequency: float) -> tuple[float, float]:
         w = 2 * np.pi * frequency
         return w * w, 2 * self.damping_ratio * w
-
-
-def _pyramid(mu: float, normal: np.ndarray) -> np.ndarray:
-    """(E, 3) edges of the linearised friction cone about a unit normal."""
-    t1 = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
-    t1 /= np.linalg.norm(t1)
-    t2 = np.cross(normal, t1)
-    m = _CONE_MARGIN * mu
-    return np.stack([normal + m * t1, normal - m * t1, normal + m * t2, normal - m * t2])
 
 
 class TrackingController:
@@ -144,9 +133,9 @@ class TrackingController:
             mu = max(m.geom_friction[c.geom1, 0], m.geom_friction[c.geom2, 0])
             mujoco.mj_jac(m, data, self._jac, None, c.pos, body)
             jacs.append(self._jac.copy())
-            cones.append(_pyramid(mu, normal))
+            cones.append(friction_pyramid(mu, normal))
         if not jacs:
-            return np.zeros((0, 3, m.nv)), np.zeros((0, _FRICTION_EDGES, 3))
+            return np.zeros((0, 3, m.nv)), np.zeros((0, FRICTION_EDGES, 3))
         return np.stack(jacs), np.stack(cones)
 
     def torques(self, data: mujoco.MjData, ref_data: mujoco.MjData, desired: np.ndarray
@@ -164,7 +153,7 @@ class TrackingController:
         jacs, cones = self._contacts(data, ref_data)
         p = len(jacs)
         # (nv, P*E): generalised force of a unit push along each edge.
-        G = np.einsum("pcv,pec->vpe", jacs, cones).reshape(nv, p * _FRICTION_EDGES)
+        G = np.einsum("pcv,pec->vpe", jacs, cones).reshape(nv, p * FRICTION_EDGES)
         nl = G.shape[1]
         we, wc = _ROOT_EQUATION_WEIGHT, self.gains.contact_weight
         rows = [np.hstack([np.diag(self._w), np.zeros((nv, nl))]),

@@ -29,8 +29,8 @@ from physpose.dynamics import quat
 from physpose.dynamics.spline import KnotGrid, fit_coefficients
 from physpose.skeleton import DOF_LIMITS, NQ, NV
 
-_FRICTION_EDGES = 4       # sides of the friction pyramid
-_CONE_MARGIN = 0.8        # use this fraction of the friction coefficient (inside the cone)
+FRICTION_EDGES = 4        # sides of the friction pyramid (friction_pyramid builds 4)
+CONE_MARGIN = 0.8         # use this fraction of the friction coefficient (inside the cone)
 _FORCE_REGULARISER = 1e-6  # relative weight of |beta|^2 for a sole point on the floor
 _HEIGHT_SCALE = 0.01      # m: a point this high above the floor costs (1 + 1)^2 = 4x as much
 
@@ -101,11 +101,15 @@ def sole_points(model: mujoco.MjModel, foot_geoms: dict[str, int]) -> list[tuple
     return points
 
 
-def _pyramid(mu: float) -> np.ndarray:
-    """(E, 3) edges of the linearised friction cone, normal +z."""
-    ang = 2 * np.pi * np.arange(_FRICTION_EDGES) / _FRICTION_EDGES
-    m = _CONE_MARGIN * mu
-    return np.stack([m * np.cos(ang), m * np.sin(ang), np.ones_like(ang)], axis=-1)
+def friction_pyramid(mu: float, normal: np.ndarray | None = None) -> np.ndarray:
+    """(FRICTION_EDGES, 3) edges of the linearised friction cone about a unit normal (default
+    +z), using ``CONE_MARGIN`` x the friction coefficient (inside the cone)."""
+    normal = np.array([0.0, 0.0, 1.0]) if normal is None else np.asarray(normal, dtype=float)
+    t1 = np.cross(normal, [1.0, 0.0, 0.0] if abs(normal[0]) < 0.9 else [0.0, 1.0, 0.0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(normal, t1)
+    m = CONE_MARGIN * mu
+    return np.stack([normal + m * t1, normal - m * t1, normal + m * t2, normal - m * t2])
 
 
 def ground_forces(model: mujoco.MjModel, data: mujoco.MjData, wrench: np.ndarray,
@@ -116,7 +120,7 @@ def ground_forces(model: mujoco.MjModel, data: mujoco.MjData, wrench: np.ndarray
     data holds the kinematics of the current state. wrench: (6,) the free joint's part of the
     inverse-dynamics force. Points higher than max_height (m) above z = 0 do not push.
     """
-    edges = _pyramid(mu)
+    edges = friction_pyramid(mu)
     columns, costs = [], []
     jacp = np.zeros((3, model.nv))
     for geom, offset in points:

@@ -275,23 +275,23 @@ class _Search:
         self.timing = timing
         self.evaluations = [0] * len(problems)
 
-    def _evaluate(self, xs: list[np.ndarray]) -> list[tuple]:
+    def _evaluate(self, problems: list[WindowProblem], xs: list[np.ndarray]) -> list[tuple]:
+        """(scores, trajectories) of the samples xs[i] (B_i, n) of problems[i], one rollout."""
         t0 = time.perf_counter()
-        ctrls = [p.ctrl(x) for p, x in zip(self.problems, xs)]
+        ctrls = [p.ctrl(x) for p, x in zip(problems, xs)]
         longest = max(c.shape[1] for c in ctrls)
         ctrl = np.concatenate([np.concatenate([c, np.repeat(c[:, -1:], longest - c.shape[1], 1)],
                                               axis=1) for c in ctrls])
         state0 = np.concatenate([np.repeat(p.state0[None], len(x), 0)
-                                 for p, x in zip(self.problems, xs)])
+                                 for p, x in zip(problems, xs)])
         traj = self.simulator.run(state0, ctrl)
         t1 = time.perf_counter()
         out, row = [], 0
-        for i, (p, x) in enumerate(zip(self.problems, xs)):
+        for p, x in zip(problems, xs):
             part = _slice(traj, slice(row, row + len(x)), p.window.num_steps)
             row += len(x)
             scores, _ = score(p, part, self.setup.objective, self.cfg.weights,
                               self.cfg.max_root_distance, self.cfg.max_penetration)
-            self.evaluations[i] += len(x)
             out.append((scores, part))
         self.timing["rollout"] = self.timing.get("rollout", 0.0) + t1 - t0
         self.timing["objective"] = self.timing.get("objective", 0.0) + time.perf_counter() - t1
@@ -324,10 +324,7 @@ class _Search:
         # rollout each; the search goes on from the best (its problem replaces the original).
         groups = [[p] + [p.starting_from(a) for a in p.alternatives] for p in self.problems]
         flat = [c for g in groups for c in g]
-        problems, self.problems, self.evaluations = self.problems, flat, [0] * len(flat)
-        evaluated = self._evaluate([c.x0.reshape(1, -1) for c in flat])
-        self.problems = problems
-        self.evaluations = [0] * len(problems)
+        evaluated = self._evaluate(flat, [c.x0.reshape(1, -1) for c in flat])
         best: list[_Best | None] = [None] * len(self.problems)
         initial, row = [], 0
         for i, group in enumerate(groups):
@@ -353,7 +350,9 @@ class _Search:
             warnings.filterwarnings("ignore", message="elements of z2", category=UserWarning)
             for _ in range(self.cfg.iterations):
                 xs = [np.vstack([np.array(es.ask()), es.mean[None]]) for es in strategies]
-                for i, (es, x, (scores, part)) in enumerate(zip(strategies, xs, self._evaluate(xs))):
+                evaluated = self._evaluate(self.problems, xs)
+                for i, (es, x, (scores, part)) in enumerate(zip(strategies, xs, evaluated)):
+                    self.evaluations[i] += len(x)
                     fitness = ranked_fitness(scores, frames[i])
                     es.tell(list(x[:-1]), fitness[:-1].tolist())
                     best[i] = self._update(best[i], x, scores, part, fitness)
@@ -395,10 +394,11 @@ def _handover_error(setup: _Setup, best: _Best, win: Window, step_end: int) -> f
 def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _Setup,
                          cfg: DynamicsConfig, timing: dict, w: int, step_end: int, label: str,
                          progress: bool) -> tuple[WindowProblem, _Best, dict, int]:
-    """Search a window (returns the problem as searched: with its chosen start); while its best sample hands the next window a state whose COM is more
+    """Search a window; while its best sample hands the next window a state whose COM is more
     than ``retry_distance`` from the estimate's (a fall in the making) or is invalid, search
     again with another seed and a larger step size, up to ``retries`` times. Keeps the attempt
-    with the smallest handover error."""
+    with the smallest handover error; returns its problem as searched (with its chosen start),
+    best sample, initial record and the number of evaluations."""
     chosen, evaluations, first_start = None, 0, None
     for attempt in range(cfg.retries + 1):
         attempt_cfg = dataclasses.replace(cfg, sigma0=cfg.sigma0 * 1.5 ** attempt)
