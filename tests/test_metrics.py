@@ -174,6 +174,20 @@ def test_evaluate_compares_in_a_common_frame():
     assert "mpjpe_g_mm" not in res
 
 
+def test_fallen_counts_frames_with_the_head_below_half_the_references():
+    stand = motion(np.zeros((10, 3)))
+    lying = stand.copy()
+    lying[6:, :, 2] *= 0.3                               # frames 6-9: everything near the floor
+    assert m.fallen(lying, stand) == pytest.approx(40.0)
+    assert m.fallen(stand, stand) == 0.0
+    assert m.fallen(lying, lying) == 0.0                 # the reference lies down too: no fall
+    res = m.evaluate(lying, stand, fps=FPS)
+    assert res["fallen_pct"] == pytest.approx(40.0)      # defaults to the truth
+    res = m.evaluate(lying, fps=FPS, fall_reference=stand)
+    assert res["fallen_pct"] == pytest.approx(40.0)
+    assert "fallen_pct" not in m.evaluate(lying, fps=FPS)
+
+
 def test_project_matches_pinhole_model():
     K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
     uv = m.project(np.array([[0.5, -0.25, 2.0]]), K, np.eye(4))

@@ -17,6 +17,7 @@ from physpose.joints import JOINT_NAMES
 
 SKATE_DISTANCE = 0.02  # m, a foot in contact moving further than this between frames skates
 FLOAT_DISTANCE = 0.02  # m, a foot out of contact but lower than this floats
+FALL_RATIO = 0.5  # a head lower than this fraction of the reference's head height has fallen
 SIDES = ("l", "r")
 
 
@@ -204,12 +205,25 @@ def ground_penetration(joints: np.ndarray, cfg: ContactConfig = KINEMATIC_CONTAC
     return float(depth.mean() * 1000), float(depth.max() * 1000)
 
 
+def fallen(joints: np.ndarray, reference: np.ndarray, joint_names=JOINT_NAMES) -> float:
+    """% of frames in which the head is lower than FALL_RATIO x the reference's head height.
+
+    Both motions stand on their own ground z = 0, so no alignment is needed: a cartwheel in
+    the reference lowers the threshold with it, a body lying on the floor where the reference
+    stands counts.
+    """
+    _check(joints, reference)
+    head = _index(joint_names, "head")
+    return float(100.0 * (joints[:, head, 2] < FALL_RATIO * reference[:, head, 2]).mean())
+
+
 def evaluate(est: np.ndarray, gt: np.ndarray | None = None, *, fps: float,
              contact: ContactConfig = KINEMATIC_CONTACT, joint_names=JOINT_NAMES,
              root: str = "pelvis", T_est2common: np.ndarray | None = None,
              T_gt2common: np.ndarray | None = None, est_2d: np.ndarray | None = None,
              target_2d: np.ndarray | None = None,
-             confidence_2d: np.ndarray | None = None) -> dict[str, float]:
+             confidence_2d: np.ndarray | None = None,
+             fall_reference: np.ndarray | None = None) -> dict[str, float]:
     """All metrics that the inputs allow, keyed with their units.
 
     est: (T, J, 3) in its own world frame (z up, ground z = 0) for the plausibility metrics.
@@ -217,6 +231,8 @@ def evaluate(est: np.ndarray, gt: np.ndarray | None = None, *, fps: float,
     T_gt2common(gt) ((4, 4) rigid transforms, identity when None): pass each motion's
     world-to-camera transform to compare in camera coordinates.
     est_2d, target_2d: (T, J, 2) px with optional confidence_2d (T, J) for MPJPE-2d.
+    fall_reference: (T, J, 3) motion (own world frame) that `fallen_pct` compares head heights
+    with; defaults to gt (both in their own world frames).
     """
     _check(est)
     out: dict[str, float] = {}
@@ -233,4 +249,7 @@ def evaluate(est: np.ndarray, gt: np.ndarray | None = None, *, fps: float,
                float_pct=foot_float(est, contact, joint_names),
                penetration_mean_mm=pen_mean, penetration_max_mm=pen_max,
                jitter_mps2=jitter(est, fps))
+    reference = gt if fall_reference is None else fall_reference
+    if reference is not None:
+        out["fallen_pct"] = fallen(est, reference, joint_names)
     return out

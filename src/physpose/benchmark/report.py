@@ -18,6 +18,8 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("Float (%)", "float_pct", "{:.0f}"),
     ("Penetration (mm)", "penetration_mean_mm", "{:.1f}"),
     ("Jitter (m/s²)", "jitter_mps2", "{:.1f}"),
+    ("Fallen (%)", "fallen_pct", "{:.0f}"),
+    ("Restarts", "restarts", "{:.1f}"),
     ("Ground normal err (deg)", "normal_angle_error_deg", "{:.1f}"),
     ("Camera height err (%)", "camera_height_error_pct", "{:.0f}"),
     ("Camera height (m)", "camera_height_m", "{:.2f}"),
@@ -26,13 +28,13 @@ COLUMNS: tuple[tuple[str, str, str], ...] = (
 # Columns shown per kind of material (those without ground truth cannot have the 3d errors).
 KIND_COLUMNS: dict[str, tuple[str, ...]] = {
     "mocap": ("mpjpe_g_mm", "mpjpe_mm", "mpjpe_pa_mm", "mpjpe_2d_px", "velocity_error_mps",
-              "foot_skate_pct", "float_pct", "penetration_mean_mm", "jitter_mps2",
-              "normal_angle_error_deg", "camera_height_error_pct"),
+              "foot_skate_pct", "float_pct", "penetration_mean_mm", "jitter_mps2", "fallen_pct",
+              "restarts", "normal_angle_error_deg", "camera_height_error_pct"),
     "multiview": ("mpjpe_g_mm", "mpjpe_mm", "mpjpe_pa_mm", "mpjpe_2d_px", "velocity_error_mps",
                   "foot_skate_pct", "float_pct", "penetration_mean_mm", "jitter_mps2",
-                  "normal_angle_error_deg", "camera_height_error_pct"),
+                  "fallen_pct", "restarts", "normal_angle_error_deg", "camera_height_error_pct"),
     "video": ("mpjpe_2d_px", "foot_skate_pct", "float_pct", "penetration_mean_mm", "jitter_mps2",
-              "camera_height_m", "camera_tilt_deg"),
+              "fallen_pct", "restarts", "camera_height_m", "camera_tilt_deg"),
 }
 KIND_TITLES = {"mocap": "Motion capture through the detector simulator",
                "multiview": "Multi-view reference, scored from each single view",
