@@ -43,10 +43,9 @@ def score_clip(clip: Clip, recon: Reconstruction) -> tuple[dict[str, float], dic
         conf = joints_from_landmarks(kp[..., 2:])[..., 0]
         weight = (conf >= MIN_DETECTION_CONFIDENCE) & clip.observations.detected[:, None]
         # Without truth, a physics motion's falls are judged against its kinematic input.
-        physics = recon.joints_physics is not None
         metrics = evaluate(joints, fps=recon.fps, contact=contact, est_2d=est_2d,
                            target_2d=target, confidence_2d=weight.astype(float),
-                           fall_reference=recon.joints_kinematic if physics else None)
+                           fall_reference=recon.joints_kinematic if recon.has_physics else None)
     return metrics, ground_figures(recon.camera_T_world2cam, clip.truth)
 
 
