@@ -29,7 +29,7 @@ noise both end 4-45 cm away: the noisy estimate itself is not physically consist
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import mujoco
 import numpy as np
@@ -62,10 +62,9 @@ class ControllerGains:
     release_height: float = 0.03
 
     def __post_init__(self) -> None:
-        for name in ("root_frequency", "orientation_frequency", "joint_frequency",
-                     "damping_ratio", "root_weight", "contact_weight", "release_height"):
-            if not getattr(self, name) > 0:
-                raise PhysposeError(f"controller {name}={getattr(self, name)} must be > 0",
+        for f in fields(self):  # every gain, weight and height is a positive number
+            if not getattr(self, f.name) > 0:
+                raise PhysposeError(f"controller {f.name}={getattr(self, f.name)} must be > 0",
                                     remedy="use the default ControllerGains()")
 
     def pd(self, frequency: float) -> tuple[float, float]:
