@@ -124,8 +124,10 @@ class DynamicsConfig:
             raise PhysposeError(f"dynamics search {self.search!r} is unknown",
                                 remedy=f"use one of {SEARCH_SETS}")
         if self.retries < 0 or not self.retry_distance > 0 or not self.reset_distance > 0:
-            raise PhysposeError("dynamics retries must be >= 0 and retry_distance > 0",
-                                remedy="use e.g. retries=2, retry_distance=0.15")
+            raise PhysposeError(f"dynamics retries={self.retries} must be >= 0, retry_distance="
+                                f"{self.retry_distance} and reset_distance={self.reset_distance}"
+                                " > 0", remedy="use e.g. retries=2, retry_distance=0.15, "
+                                "reset_distance=0.15")
         if self.iterations < 0:
             raise PhysposeError("dynamics iterations must be >= 0", remedy="use e.g. 20")
 
