@@ -84,18 +84,40 @@ def test_tracking_start_is_a_second_start_guess(clip):
     assert all(w["start"] == "inverse_dynamics" for w in plain.windows)
 
 
-def test_a_window_left_far_from_the_estimate_hands_on_a_restart(clip):
+def _teleported(clip, frame: int):
+    """The clip's estimate jumping 0.6 m forward at ``frame`` (no body can follow)."""
     body, fit, obs = clip
     jumped = fit.qpos.copy()
-    jumped[5:, 0] += 0.6  # the estimate teleports 0.6 m forward at frame 5
+    jumped[frame:, 0] += 0.6
     cfg = dataclasses.replace(TINY, retries=0)
     res = optimize_dynamics(body, dataclasses.replace(fit, qpos=jumped), obs, cfg,
                             checkpoints=False, progress=False)
-    first_reset = next(i for i, w in enumerate(res.windows) if w["reset_after"])
-    assert res.windows[first_reset]["handover_error"] > cfg.reset_distance
-    restart = res.windows[first_reset + 1]["frames"][0]
+    return res, jumped, cfg
+
+
+def test_a_window_left_far_from_the_estimate_hands_on_a_restart(clip):
+    res, jumped, cfg = _teleported(clip, 5)
+    resets = [i for i, w in enumerate(res.windows) if w["reset_after"]]
+    assert resets and not res.windows[-1]["reset_after"]
+    for i in resets:  # cut where the COM strayed, or restarted at the next window's start
+        w, following = res.windows[i], res.windows[i + 1]
+        assert w["cut_at"] == following["frames"][0] if w["cut_at"] is not None \
+            else w["handover_error"] > cfg.reset_distance
+    restart = res.windows[resets[-1] + 1]["frames"][0]
     assert abs(res.qpos[restart, 0] - jumped[restart, 0]) < 0.05
-    assert not res.windows[-1]["reset_after"]
+    assert len(res.qpos) == len(jumped) and np.isfinite(res.qpos).all()
+
+
+def test_a_last_window_that_strays_is_cut_and_restarted(clip):
+    planned = run(clip, TINY, checkpoints=False).windows
+    res, jumped, cfg = _teleported(clip, 15)  # inside the last planned window
+    assert len(res.windows) == len(planned) + 1
+    cut = res.windows[-2]["cut_at"]
+    assert cut is not None and res.windows[-1]["frames"] == [cut, len(jumped) - 1]
+    assert cut - res.windows[-2]["frames"][0] >= 5  # MIN_KEPT_SECONDS at 25 fps
+    # After the restart the body is back near the estimate instead of left behind.
+    assert abs(res.qpos[-1, 0] - jumped[-1, 0]) < 0.15
+    assert len(res.ctrl) == len(run(clip, TINY, checkpoints=False).ctrl)
 
 
 @pytest.mark.parametrize("independent", [False, True])

@@ -47,6 +47,7 @@ from physpose.observations import Observations
 from physpose.skeleton import DOF_NAMES, NQ
 
 MIN_FRAMES = 3
+MIN_KEPT_SECONDS = 0.2  # a window cut short where it strays keeps at least this much
 SEARCH_SETS = ("all", "legs_trunk")  # hinges whose targets CMA-ES varies (see searched_dofs)
 
 
@@ -427,15 +428,48 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
     return searched, best, initial, evaluations
 
 
+def _stray_frame(setup: _Setup, win: Window, com: np.ndarray, cfg: DynamicsConfig
+                 ) -> int | None:
+    """First frame a window keeps (com: (F, 3), its kept frames from win.first) whose
+    simulated COM is more than ``reset_distance`` from the estimate's, or None. A cut keeps at
+    least MIN_KEPT_SECONDS of the window and leaves at least two frames for the restart."""
+    keep = max(1, int(round(MIN_KEPT_SECONDS * setup.objective.fps)))
+    error = np.linalg.norm(com - setup.objective.com[win.first:win.first + len(com)], axis=-1)
+    far = np.flatnonzero(error[keep:] > cfg.reset_distance)
+    if not len(far):
+        return None
+    cut = win.first + keep + int(far[0])
+    return cut if cut < win.last else None
+
+
+def _window_from(setup: _Setup, index: int, first: int, last: int) -> Window:
+    """A window over frames [first, last] on the step grid (as plan_windows places them)."""
+    fps, dt = setup.objective.fps, setup.sim.dt
+    return Window(index=index, first=first, last=last,
+                  start_step=int(np.floor(step_position(first, fps, dt) + 1e-9)),
+                  end_step=int(np.ceil(step_position(last, fps, dt) - 1e-9)))
+
+
+def _cut_window(setup: _Setup, win: Window, arrays: dict, cut: int) -> dict:
+    """A window's outputs and controls kept only up to (not including) frame ``cut``."""
+    kept = cut - win.first
+    steps = _window_from(setup, 0, cut, cut).start_step - win.start_step
+    return dict(arrays, ctrl=arrays["ctrl"][:steps],
+                **{k: arrays[k][:kept] for k in _OUTPUT_KEYS})
+
+
 def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, folder: Path | None,
                     progress: bool, timing: dict) -> tuple[dict, np.ndarray, list[dict]]:
-    wins = setup.windows
+    wins = list(setup.windows)  # a window that strays is cut short: the plan changes
     coefs = setup.coefs0.copy()
     state = _kinematic_state(setup, 0, cfg.ground_snap)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in _OUTPUT_KEYS}
     ctrl_parts, records = [], []
     reset = False
-    for w, win in enumerate(wins):
+    w = -1
+    while w + 1 < len(wins):
+        w += 1
+        win = wins[w]
         commit_end = wins[w + 1].first if w + 1 < len(wins) else win.last + 1
         step_end = wins[w + 1].start_step if w + 1 < len(wins) else win.end_step
         saved = checkpoint.load_window(folder, w) if folder is not None else None
@@ -463,15 +497,23 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             arrays, record = saved
         coefs, state = arrays["coefs"], arrays["next_state"]
         # A window that could not keep the body near the estimate hands on a restart from the
-        # kinematic state instead of a fall in progress (a jump in the output, recorded).
-        reset = w + 1 < len(wins) and record.get("handover_error") is not None \
-            and record["handover_error"] > cfg.reset_distance
+        # kinematic state instead of a fall in progress (a jump in the output, recorded):
+        # from the first kept frame whose COM strayed further than reset_distance, or else
+        # from the next window's start when the handover state has strayed that far.
+        cut = _stray_frame(setup, win, arrays["com"], cfg)
+        if cut is not None:
+            arrays = _cut_window(setup, win, arrays, cut)
+            following = wins[w + 1] if w + 1 < len(wins) else win
+            wins[w + 1:w + 2] = [_window_from(setup, w + 1, cut, following.last)]
+        reset = w + 1 < len(wins) and (cut is not None or (
+            record.get("handover_error") is not None
+            and record["handover_error"] > cfg.reset_distance))
         if reset:
             state = _kinematic_state(setup, wins[w + 1].start_step, cfg.ground_snap)
             coefs = np.where(np.arange(len(coefs))[:, None] >= setup.grid.active(
                 wins[w + 1].start_step * setup.sim.dt, setup.grid.duration).start, setup.coefs0,
                 coefs)
-        record = dict(record, reset_after=bool(reset))
+        record = dict(record, reset_after=bool(reset), cut_at=cut)
         for k in _OUTPUT_KEYS:
             parts[k].append(arrays[k])
         ctrl_parts.append(arrays["ctrl"])
