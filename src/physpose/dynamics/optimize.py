@@ -40,7 +40,7 @@ from physpose.dynamics.rollout import SimModel, Simulator, Trajectories, make_st
 from physpose.dynamics.spline import KnotGrid
 from physpose.dynamics.controller import ControllerGains, track_reference
 from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
-                                       ranked_fitness, score, step_position)
+                                       ranked_fitness, score, step_position, window_over)
 from physpose.errors import PhysposeError
 from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
@@ -73,7 +73,9 @@ class DynamicsConfig:
     more than retry_distance (m) from the estimate's is searched again (another seed, 1.5x the
     step size), at most retries times. reset_distance: if the kept result still hands on a COM
     further than this (m) from the estimate's, the next window restarts from the kinematic
-    state (a discontinuity instead of a fall that would carry on; recorded as reset_after).
+    state (a discontinuity instead of a fall that would carry on; recorded as reset_after); a
+    window whose COM strays this far at an earlier kept frame is cut there and a window from
+    that frame restarts (recorded as cut_at).
     search: "all" hinges, or "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
     needs; arms, neck and head keep their inverse-dynamics targets). seed: CMA-ES seed.
     nthread: rollout threads (does not change results).
@@ -442,18 +444,11 @@ def _stray_frame(setup: _Setup, win: Window, com: np.ndarray, cfg: DynamicsConfi
     return cut if cut < win.last else None
 
 
-def _window_from(setup: _Setup, index: int, first: int, last: int) -> Window:
-    """A window over frames [first, last] on the step grid (as plan_windows places them)."""
-    fps, dt = setup.objective.fps, setup.sim.dt
-    return Window(index=index, first=first, last=last,
-                  start_step=int(np.floor(step_position(first, fps, dt) + 1e-9)),
-                  end_step=int(np.ceil(step_position(last, fps, dt) - 1e-9)))
-
-
 def _cut_window(setup: _Setup, win: Window, arrays: dict, cut: int) -> dict:
     """A window's outputs and controls kept only up to (not including) frame ``cut``."""
     kept = cut - win.first
-    steps = _window_from(setup, 0, cut, cut).start_step - win.start_step
+    steps = window_over(0, cut, cut, setup.objective.fps, setup.sim.dt).start_step \
+        - win.start_step
     return dict(arrays, ctrl=arrays["ctrl"][:steps],
                 **{k: arrays[k][:kept] for k in _OUTPUT_KEYS})
 
@@ -466,9 +461,8 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
     parts: dict[str, list[np.ndarray]] = {k: [] for k in _OUTPUT_KEYS}
     ctrl_parts, records = [], []
     reset = False
-    w = -1
-    while w + 1 < len(wins):
-        w += 1
+    w = 0
+    while w < len(wins):
         win = wins[w]
         commit_end = wins[w + 1].first if w + 1 < len(wins) else win.last + 1
         step_end = wins[w + 1].start_step if w + 1 < len(wins) else win.end_step
@@ -504,7 +498,8 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
         if cut is not None:
             arrays = _cut_window(setup, win, arrays, cut)
             following = wins[w + 1] if w + 1 < len(wins) else win
-            wins[w + 1:w + 2] = [_window_from(setup, w + 1, cut, following.last)]
+            wins[w + 1:w + 2] = [window_over(w + 1, cut, following.last, setup.objective.fps,
+                                             setup.sim.dt)]
         reset = w + 1 < len(wins) and (cut is not None or (
             record.get("handover_error") is not None
             and record["handover_error"] > cfg.reset_distance))
@@ -518,6 +513,7 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             parts[k].append(arrays[k])
         ctrl_parts.append(arrays["ctrl"])
         records.append(record)
+        w += 1
     return ({k: np.concatenate(v) for k, v in parts.items()}, np.concatenate(ctrl_parts),
             records)
 

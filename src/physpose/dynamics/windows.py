@@ -59,13 +59,16 @@ def plan_windows(num_frames: int, fps: float, dt: float, window: float, overlap:
         starts.append(starts[-1] + stride)
     if anchor_last and len(starts) > 1:
         starts[-1] = max(0, last_frame - length)
-    out = []
-    for i, first in enumerate(starts):
-        last = min(first + length, last_frame)
-        out.append(Window(index=i, first=first, last=last,
-                          start_step=int(math.floor(step_position(first, fps, dt) + 1e-9)),
-                          end_step=int(math.ceil(step_position(last, fps, dt) - 1e-9))))
-    return out
+    return [window_over(i, first, min(first + length, last_frame), fps, dt)
+            for i, first in enumerate(starts)]
+
+
+def window_over(index: int, first: int, last: int, fps: float, dt: float) -> Window:
+    """The window of frames [first, last]: its simulation starts at the step at or just
+    before ``first`` and ends at the step at or just after ``last``."""
+    return Window(index=index, first=first, last=last,
+                  start_step=int(math.floor(step_position(first, fps, dt) + 1e-9)),
+                  end_step=int(math.ceil(step_position(last, fps, dt) - 1e-9)))
 
 
 @dataclass(frozen=True, eq=False)
