@@ -5,7 +5,9 @@
 Sequential windows (the default, as in the paper): each window starts from the simulated state
 of the previous one at its first frame and searches the spline coefficients whose support
 begins inside it; coefficients already acting before its start stay as the previous window left
-them, so the whole clip is one simulation driven by one spline. Independent windows (the
+them, so the whole clip is one simulation driven by one spline, except where the simulated
+COM strays more than ``reset_distance`` from the estimate: the window is cut there and the run
+restarts from the kinematic state (a recorded jump). Independent windows (the
 paper's mode for long clips): every window starts from the kinematic state at its first frame,
 searches all its coefficients, and the windows are searched side by side (their samples share
 one batched rollout) and cross-faded where they overlap.
