@@ -446,12 +446,10 @@ def _stray_frame(setup: _Setup, win: Window, com: np.ndarray, cfg: DynamicsConfi
     return cut if cut < win.last else None
 
 
-def _cut_window(setup: _Setup, win: Window, arrays: dict, cut: int) -> dict:
-    """A window's outputs and controls kept only up to (not including) frame ``cut``."""
-    kept = cut - win.first
-    steps = window_over(0, cut, cut, setup.objective.fps, setup.sim.dt).start_step \
-        - win.start_step
-    return dict(arrays, ctrl=arrays["ctrl"][:steps],
+def _cut_window(win: Window, arrays: dict, restart: Window) -> dict:
+    """A window's outputs and controls kept only up to where ``restart`` begins."""
+    kept = restart.first - win.first
+    return dict(arrays, ctrl=arrays["ctrl"][:restart.start_step - win.start_step],
                 **{k: arrays[k][:kept] for k in _OUTPUT_KEYS})
 
 
@@ -498,10 +496,10 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
         # from the next window's start when the handover state has strayed that far.
         cut = _stray_frame(setup, win, arrays["com"], cfg)
         if cut is not None:
-            arrays = _cut_window(setup, win, arrays, cut)
             following = wins[w + 1] if w + 1 < len(wins) else win
-            wins[w + 1:w + 2] = [window_over(w + 1, cut, following.last, setup.objective.fps,
-                                             setup.sim.dt)]
+            restart = window_over(w + 1, cut, following.last, setup.objective.fps, setup.sim.dt)
+            arrays = _cut_window(win, arrays, restart)
+            wins[w + 1:w + 2] = [restart]
         reset = w + 1 < len(wins) and (cut is not None or (
             record.get("handover_error") is not None
             and record["handover_error"] > cfg.reset_distance))
