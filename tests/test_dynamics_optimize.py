@@ -75,6 +75,18 @@ def test_searching_legs_and_trunk_keeps_the_other_targets(clip):
     np.testing.assert_allclose(res.ctrl[:, kept], init.ctrl[:, kept], atol=1e-12)
 
 
+def test_candidates_keep_the_lowest_loss_seed(clip):
+    best = run(clip, dataclasses.replace(TINY, candidates=2, seed=3), checkpoints=False)
+    singles = [run(clip, dataclasses.replace(TINY, seed=s), checkpoints=False) for s in (3, 4)]
+    losses = [r.losses()["total"] for r in singles]
+    assert [c["seed"] for c in best.candidates] == [3, 4]
+    assert [c["loss"] for c in best.candidates] == pytest.approx(losses)
+    k = int(np.argmin(losses))
+    assert [c["kept"] for c in best.candidates] == [k == 0, k == 1]
+    np.testing.assert_array_equal(best.qpos, singles[k].qpos)
+    assert best.config["candidates"] == 2 and singles[0].candidates == []
+
+
 def test_tracking_start_is_a_second_start_guess(clip):
     res = run(clip, dataclasses.replace(TINY, tracking_start=True), checkpoints=False)
     plain = run(clip, TINY, checkpoints=False)
@@ -172,6 +184,8 @@ def test_presets_and_ablations():
         DynamicsConfig(overlap=2.0)
     with pytest.raises(PhysposeError):
         DynamicsConfig(search="arms")
+    with pytest.raises(PhysposeError):
+        DynamicsConfig(candidates=0)
 
 
 def test_mismatched_inputs_are_refused(clip):

@@ -108,7 +108,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
         joints_physics=phys.joints, qpos_physics=phys.qpos, landmarks_physics=phys.landmarks)
     meta = dict(recon.meta)
     meta.update(timings_s=timings, dynamics={"windows": phys.windows, "losses": phys.losses(),
-                                            "timings": phys.timings},
+                                            "timings": phys.timings,
+                                            "candidates": phys.candidates},
                 physpose_version=__version__)
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)

@@ -18,6 +18,8 @@ class PhysicsResult:
     200 Hz step (sequential windows) or the windows' targets one after another (independent).
     windows: one record per window (frames, steps, evaluations, initial and final loss and
     terms, seconds). timings: seconds per sub-step. config: the resolved DynamicsConfig.
+    candidates: with DynamicsConfig.candidates > 1, one row per whole-clip run (seed, mean
+    window loss, kept); empty otherwise.
     """
 
     fps: float
@@ -30,6 +32,7 @@ class PhysicsResult:
     windows: list[dict] = dataclasses.field(default_factory=list)
     timings: dict = dataclasses.field(default_factory=dict)
     config: dict = dataclasses.field(default_factory=dict)
+    candidates: list[dict] = dataclasses.field(default_factory=list)
 
     @property
     def num_frames(self) -> int:
