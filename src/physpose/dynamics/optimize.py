@@ -152,10 +152,9 @@ class DynamicsConfig:
 
 
 PRESETS: dict[str, DynamicsConfig] = {
-    # Tracking start on: on 4 motion-capture clips it cut MPJPE-G on three. Two candidates:
-    # over 3 seeds x 5 clips the lower-loss run of two had the lower error in 12 of 15 pairs
-    # (docs/dynamics.md); twice the time.
-    "fast": DynamicsConfig(tracking_start=True, candidates=2),
+    # Tracking start on: on 4 motion-capture clips it cut MPJPE-G on three. One candidate: two
+    # (twice the time) helped on motion capture but not on real detections (docs/dynamics.md).
+    "fast": DynamicsConfig(tracking_start=True),
     # The paper's budget: 2000 iterations x 100 samples per 1 s window, full covariance; its
     # reference is the grounded estimate as it is (no flattened stance feet).
     "paper": DynamicsConfig(popsize=100, iterations=2000, diagonal=False, search="all",
