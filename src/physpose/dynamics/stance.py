@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from physpose.dynamics.init import geom_lowest
 from physpose.skeleton import DOF_LIMITS, DOF_NAMES
 
 LEG_JOINTS = ("hip", "knee", "ankle")
@@ -87,10 +88,9 @@ def foot_states(model: mujoco.MjModel, qpos: np.ndarray, foot_geoms: dict[str, i
         mujoco.mj_kinematics(model, data)
         for k, side in enumerate(("l", "r")):
             g = foot_geoms[side]
-            rot = data.geom_xmat[g].reshape(3, 3)
             centre[t, k] = data.geom_xpos[g]
-            lowest[t, k] = data.geom_xpos[g][2] - np.abs(rot[2]) @ model.geom_size[g]
-            tilt[t, k] = np.arccos(np.clip(rot[2, 2], -1.0, 1.0))
+            lowest[t, k] = geom_lowest(model, data, g)
+            tilt[t, k] = np.arccos(np.clip(data.geom_xmat[g][8], -1.0, 1.0))  # sole normal vs z
     return centre, lowest, tilt
 
 
@@ -109,8 +109,7 @@ def stance_weights(centre: np.ndarray, lowest: np.ndarray, tilt: np.ndarray, fps
     kernel = np.concatenate([np.arange(1, n + 2), np.arange(n, 0, -1)]).astype(float)
     kernel /= kernel.sum()
     padded = np.pad(standing, ((n, n), (0, 0)), mode="edge")
-    faded = np.stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(2)], axis=1)
-    return faded
+    return np.stack([np.convolve(padded[:, k], kernel, mode="valid") for k in range(2)], axis=1)
 
 
 def _foot_pose(data: mujoco.MjData, geom: int) -> tuple[np.ndarray, np.ndarray]:
