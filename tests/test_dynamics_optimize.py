@@ -76,9 +76,11 @@ def test_searching_legs_and_trunk_keeps_the_other_targets(clip):
 
 
 def test_candidates_keep_the_lowest_loss_seed(clip):
-    best = run(clip, dataclasses.replace(TINY, candidates=2, seed=3), checkpoints=False)
-    singles = [run(clip, dataclasses.replace(TINY, seed=s), checkpoints=False) for s in (3, 4)]
+    cfg = dataclasses.replace(TINY, popsize=8, iterations=6, sigma0=0.005)  # small steps improve here
+    best = run(clip, dataclasses.replace(cfg, candidates=2, seed=3), checkpoints=False)
+    singles = [run(clip, dataclasses.replace(cfg, seed=s), checkpoints=False) for s in (3, 4)]
     losses = [r.losses()["total"] for r in singles]
+    assert losses[0] != losses[1]                         # the seeds' searches differ
     assert [c["seed"] for c in best.candidates] == [3, 4]
     assert [c["loss"] for c in best.candidates] == pytest.approx(losses)
     k = int(np.argmin(losses))

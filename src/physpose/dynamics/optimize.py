@@ -643,6 +643,9 @@ def _best_candidate(body: Body, kinematic_fit: KinematicFit, observations: Obser
     results, table = [], []
     for j in range(config.candidates):
         single = dataclasses.replace(config, seed=config.seed + j, candidates=1)
+        if kwargs.get("progress", True):
+            tqdm.write(f"dynamics: candidate {j + 1}/{config.candidates} (seed {single.seed})",
+                       file=sys.stderr)
         result = optimize_dynamics(body, kinematic_fit, observations, single, **kwargs)
         loss = result.losses()["total"] if all(w["valid"] for w in result.windows) else np.inf
         results.append(result)
