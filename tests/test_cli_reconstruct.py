@@ -38,6 +38,7 @@ def _args(*argv: str):
     (["--ground-friction", "-1"], "ground friction -1.0 must be >= 0"),
     (["--ground-stiffness", "0"], "ground stiffness 0.0 must be positive"),
     (["--height", "9"], "height 9.0 m is outside"),
+    (["--candidates", "0"], "candidates must be >= 1"),
     (["--fps", "1000"], "outside"),
     (["--camera", "{missing}.json"], "camera file not found"),
     (["--camera", "{bad_json}"], "cannot read camera intrinsics"),
@@ -89,6 +90,9 @@ def test_flags_make_the_pipeline_config():
     assert default.scene.obstacles == () and default.scene.ground_solref == (0.02, 1.0)
     stiff = pipeline_config(_args("v.mp4", "--out", "o", "--ground-stiffness", "400"))
     assert stiff.scene.ground_stiffness_damping() == pytest.approx((400.0, 40.0))
+    assert default.dynamics.candidates == 1
+    assert pipeline_config(_args("v.mp4", "--out", "o", "--candidates", "3")
+                           ).dynamics.candidates == 3
 
 
 def test_export_formats():

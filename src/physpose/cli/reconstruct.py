@@ -47,9 +47,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("video", type=Path, help="video file, or a keypoints .json/.npz")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--preset", choices=tuple(PRESETS), default="fast",
-                   help="optimisation budget: fast (default; about a minute per second of "
+                   help="optimisation budget: fast (default; measured 8-20 s per second of "
                         "video on 2 cores) or paper (2000 x 100 samples per 1 s window: hours "
                         "per second of video)")
+    p.add_argument("--candidates", type=int, metavar="N",
+                   help="optimise the whole clip N times (seeds 0..N-1) and keep the run with "
+                        "the lowest loss: N times the time (default 1)")
     g = p.add_argument_group("the person and the video")
     g.add_argument("--height", type=float, metavar="M", help="the person's standing height, m")
     g.add_argument("--mass", type=float, metavar="KG", help="the person's mass, kg")
@@ -117,7 +120,11 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     if args.fps is not None:
         observe = dataclasses.replace(observe, target_fps=args.fps)
     observe = dataclasses.replace(observe, start=args.start, end=args.end)
-    return dataclasses.replace(config, observe=observe, scene=scene_config(args))
+    dynamics = config.dynamics
+    if args.candidates is not None:
+        dynamics = dataclasses.replace(dynamics, candidates=args.candidates)
+    return dataclasses.replace(config, observe=observe, dynamics=dynamics,
+                               scene=scene_config(args))
 
 
 def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:
