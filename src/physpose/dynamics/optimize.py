@@ -37,7 +37,7 @@ from physpose.dynamics.init import (Reference, geom_lowest, ground_motion, groun
                                     initial_coefficients, inverse_dynamics_targets,
                                     smooth_reference)
 from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, make_reference)
-from physpose.dynamics.result import PhysicsResult
+from physpose.dynamics.result import PhysicsResult, mean_window_loss
 from physpose.dynamics.rollout import SimModel, Simulator, Trajectories, make_state, sim_model
 from physpose.dynamics.spline import KnotGrid
 from physpose.dynamics.stance import flatten_stance_feet
@@ -609,51 +609,40 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
     writes and reads none. progress: a tqdm bar per window on stderr.
     """
     _check_inputs(kinematic_fit, observations)
-    if config.candidates > 1:
-        return _best_candidate(body, kinematic_fit, observations, config,
-                               checkpoint_dir=checkpoint_dir, checkpoints=checkpoints,
-                               progress=progress)
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     sim = sim_model(body)
-    setup = _setup(sim, kinematic_fit, observations, config)
+    setup = _setup(sim, kinematic_fit, observations, config)  # the same for every seed
     timing["prepare"] = time.perf_counter() - t0
-    folder = None
-    if checkpoints:
-        # The key is a single run's: candidates only says how many seeds to try.
-        single = {k: v for k, v in config.identity().items() if k != "candidates"}
-        key = checkpoint.run_key(single, run_inputs(body, kinematic_fit, observations))
-        folder = checkpoint.run_folder(key, checkpoint_dir)
     run = _run_independent if config.independent else _run_sequential
+    runs, table = [], []
     with Simulator(sim, config.nthread) as simulator:
-        outputs, ctrl, records = run(setup, simulator, config, folder, progress, timing)
+        # Candidates: whole-clip runs with seeds seed, seed + 1, ..., each checkpointed as
+        # the single run of its seed; the lowest mean window loss is kept.
+        for j in range(config.candidates):
+            single = dataclasses.replace(config, seed=config.seed + j, candidates=1)
+            if config.candidates > 1 and progress:
+                tqdm.write(f"dynamics: candidate {j + 1}/{config.candidates} "
+                           f"(seed {single.seed})", file=sys.stderr)
+            folder = None
+            if checkpoints:
+                # The key is a single run's: candidates only says how many seeds to try.
+                identity = {k: v for k, v in single.identity().items() if k != "candidates"}
+                key = checkpoint.run_key(identity, run_inputs(body, kinematic_fit, observations))
+                folder = checkpoint.run_folder(key, checkpoint_dir)
+            outputs, ctrl, records = run(setup, simulator, single, folder, progress, timing)
+            runs.append((outputs, ctrl, records))
+            valid = all(r["valid"] for r in records)
+            table.append({"seed": single.seed,
+                          "loss": mean_window_loss(records) if valid else float("inf")})
+    k = min(range(len(runs)), key=lambda j: table[j]["loss"])
+    outputs, ctrl, records = runs[k]
     timing["total"] = time.perf_counter() - t0
-    timing["search"] = sum(r["seconds"] for r in records)
+    timing["search"] = sum(r["seconds"] for _, _, recs in runs for r in recs)
+    candidates = [dict(row, kept=j == k) for j, row in enumerate(table)] \
+        if config.candidates > 1 else []
     return PhysicsResult(
         fps=kinematic_fit.fps, qpos=outputs["qpos"], joints=outputs["joints"],
         landmarks=outputs["landmarks"], com=outputs["com"],
         foot_heights=foot_heights(sim.model, outputs["qpos"], body.foot_geom_ids), ctrl=ctrl,
-        windows=records, timings=timing, config=config.identity())
-
-
-def _best_candidate(body: Body, kinematic_fit: KinematicFit, observations: Observations,
-                    config: DynamicsConfig, **kwargs) -> PhysicsResult:
-    """Run ``config.candidates`` whole-clip optimisations (seeds seed, seed + 1, ...; each
-    checkpointed as the single run of that seed) and keep the lowest mean window loss."""
-    results, table = [], []
-    for j in range(config.candidates):
-        single = dataclasses.replace(config, seed=config.seed + j, candidates=1)
-        if kwargs.get("progress", True):
-            tqdm.write(f"dynamics: candidate {j + 1}/{config.candidates} (seed {single.seed})",
-                       file=sys.stderr)
-        result = optimize_dynamics(body, kinematic_fit, observations, single, **kwargs)
-        loss = result.losses()["total"] if all(w["valid"] for w in result.windows) else np.inf
-        results.append(result)
-        table.append({"seed": single.seed, "loss": float(loss)})
-    k = min(range(len(results)), key=lambda j: table[j]["loss"])
-    for j, row in enumerate(table):
-        row["kept"] = j == k
-    kept = results[k]
-    timings = dict(kept.timings, total=sum(r.timings["total"] for r in results),
-                   search=sum(r.timings["search"] for r in results))
-    return dataclasses.replace(kept, timings=timings, candidates=table, config=config.identity())
+        windows=records, timings=timing, config=config.identity(), candidates=candidates)

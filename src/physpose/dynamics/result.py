@@ -44,5 +44,10 @@ class PhysicsResult:
             return {}
         names = self.windows[0]["terms_final"].keys()
         out = {n: float(np.mean([w["terms_final"][n] for w in self.windows])) for n in names}
-        out["total"] = float(np.mean([w["loss_final"] for w in self.windows]))
+        out["total"] = mean_window_loss(self.windows)
         return out
+
+
+def mean_window_loss(windows: list[dict]) -> float:
+    """The windows' final weighted losses, averaged (unweighted by length)."""
+    return float(np.mean([w["loss_final"] for w in windows]))
