@@ -11,6 +11,7 @@ import pytest
 from physpose.body import build_body
 from physpose.dynamics import ABLATIONS, PRESETS, DynamicsConfig, ablated, optimize_dynamics
 from physpose.dynamics import checkpoint
+from physpose.dynamics.balance import BalanceGains
 from physpose.dynamics.optimize import _cma, _window_seed
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.dynamics.windows import blend_weights, plan_windows
@@ -96,6 +97,18 @@ def test_tracking_start_is_a_second_start_guess(clip):
         assert w["start"] in ("inverse_dynamics", "tracking")
         assert w["evaluations"] == p["evaluations"] + 1
     assert all(w["start"] == "inverse_dynamics" for w in plain.windows)
+
+
+def test_balance_feedback_is_recorded_and_deterministic(clip):
+    cfg = dataclasses.replace(TINY, balance=BalanceGains(frequency=1.0))
+    res = run(clip, cfg, checkpoints=False)
+    again = run(clip, cfg, checkpoints=False)
+    plain = run(clip, TINY, checkpoints=False)
+    np.testing.assert_array_equal(res.qpos, again.qpos)
+    # The targets recorded are those applied, feedback included (rollout tests replay them).
+    assert not np.array_equal(res.ctrl, plain.ctrl)
+    # Switched off, the config (and so the checkpoint key) is what it was before the option.
+    assert res.config["balance"]["frequency"] == 1.0 and "balance" not in plain.config
 
 
 def _teleported(clip, frame: int):

@@ -20,6 +20,7 @@ import numpy as np
 from mujoco import rollout as mj_rollout
 
 from physpose.body import Body
+from physpose.dynamics.balance import BalancePlan
 from physpose.joints import JOINT_NAMES, LANDMARK_NAMES
 from physpose.skeleton import NQ, NUM_DOF, NV
 
@@ -96,11 +97,16 @@ class FrameSamples:
 
 @dataclass(frozen=True, eq=False)
 class Trajectories:
-    """Every step of a batch: states (B, n+1, nstate), sensors (B, n+1, nsens), broken (B, n+1)."""
+    """Every step of a batch: states (B, n+1, nstate), sensors (B, n+1, nsens), broken (B, n+1).
+
+    ctrl (B, n, 48): the servo targets applied (the given ones plus any balance feedback), or
+    None when not recorded.
+    """
 
     states: np.ndarray
     sensors: np.ndarray
     broken: np.ndarray
+    ctrl: np.ndarray | None = None
 
     def at(self, positions: np.ndarray) -> FrameSamples:
         """Sample at fractional step positions (F,) in [0, n] by linear interpolation."""
@@ -144,10 +150,14 @@ class Simulator:
     def __exit__(self, *exc) -> None:
         self.close()
 
-    def run(self, state0: np.ndarray, ctrl: np.ndarray) -> Trajectories:
+    def run(self, state0: np.ndarray, ctrl: np.ndarray,
+            feedback: list[tuple[slice, BalancePlan]] | None = None) -> Trajectories:
         """Roll out servo targets ctrl (B, n, 48) from state0 (nstate,) or (B, nstate).
 
-        Returns states and sensors of the n + 1 states 0..n (state 0 = state0).
+        feedback: balance plans and the rows they steer; the batch is then stepped in chunks
+        between the plans' feedback steps, each chunk's targets offset by the feedback on the
+        samples' COM at its start. Returns states and sensors of the n + 1 states 0..n
+        (state 0 = state0) and the targets applied.
         """
         ctrl = np.asarray(ctrl, dtype=float)
         b, n, nu = ctrl.shape
@@ -156,10 +166,44 @@ class Simulator:
         state0 = np.broadcast_to(state0, (b, self.sim.nstate)).copy()
         # One extra step: its sensors are those of state n (sensors lag the state by a step).
         padded = np.concatenate([ctrl, ctrl[:, -1:]], axis=1)
-        states, sensors = self._pool.rollout(self.sim.model, self._data, state0, padded)
+        if feedback:
+            states, sensors, padded = self._run_with_feedback(state0, padded, feedback)
+        else:
+            states, sensors = self._pool.rollout(self.sim.model, self._data, state0, padded)
         states = np.concatenate([state0[:, None], states[:, :n]], axis=1)
         expected = state0[:, :1] + self.sim.dt * np.arange(n + 1)[None, :]
         bad = (np.abs(states[..., 0] - expected) > _TIME_TOLERANCE) \
             | ~np.isfinite(states).all(axis=-1) | ~np.isfinite(sensors).all(axis=-1)
         broken = np.logical_or.accumulate(bad, axis=1)
-        return Trajectories(states=states, sensors=sensors, broken=broken)
+        return Trajectories(states=states, sensors=sensors, broken=broken, ctrl=padded[:, :n])
+
+    def _run_with_feedback(self, state0: np.ndarray, padded: np.ndarray,
+                           feedback: list[tuple[slice, BalancePlan]]
+                           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Chunked rollout; the first chunk runs without feedback (no sensors yet), later
+        ones read the COM of the chunk's last sensed state (one step old) and its velocity
+        over the chunk."""
+        applied = padded.copy()
+        total = padded.shape[1]
+        bounds = sorted({int(s) for _, plan in feedback for s in plan.starts if 0 < s < total})
+        bounds = [0, *bounds, total]
+        states, sensors = [], []
+        current = state0
+        for a, z in zip(bounds[:-1], bounds[1:]):
+            if a > 0:
+                com = sensors[-1][:, -1, -3:]
+                span = sensors[-1].shape[1] - 1
+                vel = (com - sensors[-1][:, 0, -3:]) / (span * self.sim.dt) if span > 0 \
+                    else np.zeros_like(com)
+                for rows, plan in feedback:
+                    chunk = int(np.searchsorted(plan.starts, a, side="right")) - 1
+                    if plan.starts[chunk] != a:
+                        continue  # this plan has no feedback step here; keeps its offset
+                    offset = plan.offsets(chunk, com[rows], vel[rows])
+                    applied[rows, a:] = padded[rows, a:] + offset[:, None, :]
+            st, se = self._pool.rollout(self.sim.model, self._data, current,
+                                        np.ascontiguousarray(applied[:, a:z]))
+            states.append(st)
+            sensors.append(se)
+            current = st[:, -1].copy()
+        return np.concatenate(states, axis=1), np.concatenate(sensors, axis=1), applied

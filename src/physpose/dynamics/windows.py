@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from physpose.dynamics.balance import BalancePlan
 from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, evaluate_terms,
                                          invalid_from, total)
 from physpose.dynamics.rollout import FrameSamples, Trajectories
@@ -90,6 +91,7 @@ class WindowProblem:
     positions: np.ndarray
     history: np.ndarray | None
     alternatives: tuple[np.ndarray, ...] = ()  # other start guesses: servo targets (S, 48)
+    balance: BalancePlan | None = None  # closed-loop balance feedback in its rollouts
 
     @property
     def x0(self) -> np.ndarray:
