@@ -39,6 +39,7 @@ def _args(*argv: str):
     (["--ground-stiffness", "0"], "ground stiffness 0.0 must be positive"),
     (["--height", "9"], "height 9.0 m is outside"),
     (["--candidates", "0"], "candidates must be >= 1"),
+    (["--balance-hz", "-1"], "balance gains"),
     (["--fps", "1000"], "outside"),
     (["--camera", "{missing}.json"], "camera file not found"),
     (["--camera", "{bad_json}"], "cannot read camera intrinsics"),
@@ -93,6 +94,9 @@ def test_flags_make_the_pipeline_config():
     assert default.dynamics.candidates == 1
     assert pipeline_config(_args("v.mp4", "--out", "o", "--candidates", "3")
                            ).dynamics.candidates == 3
+    assert default.dynamics.balance.frequency == 0.5
+    assert not pipeline_config(_args("v.mp4", "--out", "o", "--balance-hz", "0")
+                               ).dynamics.balance.enabled
 
 
 def test_export_formats():

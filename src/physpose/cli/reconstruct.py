@@ -53,6 +53,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--candidates", type=int, metavar="N",
                    help="optimise the whole clip N times (seeds 0..N-1) and keep the run with "
                         "the lowest loss: N times the time (default 1)")
+    p.add_argument("--balance-hz", type=float, metavar="HZ",
+                   help="closed-loop balance feedback (centre of mass through the standing "
+                        "ankles) in every simulated sample, Hz; 0 switches it off (default: "
+                        "0.5 in fast, off in paper)")
     g = p.add_argument_group("the person and the video")
     g.add_argument("--height", type=float, metavar="M", help="the person's standing height, m")
     g.add_argument("--mass", type=float, metavar="KG", help="the person's mass, kg")
@@ -123,6 +127,9 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     dynamics = config.dynamics
     if args.candidates is not None:
         dynamics = dataclasses.replace(dynamics, candidates=args.candidates)
+    if args.balance_hz is not None:
+        dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
+            dynamics.balance, frequency=args.balance_hz))
     return dataclasses.replace(config, observe=observe, dynamics=dynamics,
                                scene=scene_config(args))
 

@@ -43,11 +43,15 @@ class BalanceGains:
     max_offset: float = 0.3
 
     def __post_init__(self) -> None:
-        if self.frequency < 0 or self.damping < 0 or self.stance_height < 0 \
-                or not self.max_offset > 0 or self.interval < 1:
-            raise PhysposeError(f"balance gains {self} out of range",
-                                remedy="use frequency >= 0, damping >= 0, interval >= 1, "
-                                       "max_offset > 0")
+        bad = [f"{n}={getattr(self, n)}" for n, ok in (
+            ("frequency", self.frequency >= 0), ("damping", self.damping >= 0),
+            ("interval", self.interval >= 1), ("stance_height", self.stance_height >= 0),
+            ("max_offset", self.max_offset > 0)) if not ok]
+        if bad:
+            raise PhysposeError(f"balance gains out of range: {', '.join(bad)}",
+                                remedy="use frequency >= 0 Hz (0: off), damping >= 0, "
+                                       "interval >= 1 step, stance_height >= 0 m, "
+                                       "max_offset > 0 rad")
 
     @property
     def enabled(self) -> bool:
