@@ -72,9 +72,28 @@ def test_only_standing_legs_get_gains(body):
     assert np.abs(far).max() == pytest.approx(plan.max_offset)
 
 
+def test_feedback_fades_out_while_the_reference_moves_fast(body):
+    sim = sim_model(body)
+    q = standing_qpos(body)
+    gains = BalanceGains(frequency=1.0, interval=5, max_speed=0.8)
+
+    def gain(speed):
+        ref = _still(q, sim.dt, 20)
+        ref.qpos[:, 0] += speed * sim.dt * np.arange(21)  # the whole body glides forward
+        return balance_plan(sim.model, ref, 0, 20, body.foot_geom_ids, body.kp, gains).gain
+
+    still, slow, half, fast = gain(0.0), gain(0.3), gain(0.6), gain(1.0)
+    assert np.abs(still).max() > 0
+    np.testing.assert_allclose(slow, still, atol=1e-9)          # under max_speed / 2: full
+    np.testing.assert_allclose(half[1:3], 0.5 * still[1:3], rtol=1e-6, atol=1e-9)
+    assert np.all(fast == 0)
+
+
 def test_gains_are_checked():
     with pytest.raises(PhysposeError):
         BalanceGains(frequency=-1.0)
     with pytest.raises(PhysposeError):
         BalanceGains(interval=0)
+    with pytest.raises(PhysposeError, match="max_speed"):
+        BalanceGains(max_speed=0.0)
     assert not BalanceGains().enabled and BalanceGains(frequency=1.0).enabled

@@ -34,24 +34,28 @@ from physpose.skeleton import DOF_NAMES, NUM_DOF
 class BalanceGains:
     """frequency: Hz of the COM PD (0 switches feedback off); damping: its ratio.
     interval: simulation steps between feedback updates. stance_height: m, a reference foot
-    box this close to the floor stands. max_offset: rad, largest servo-target offset."""
+    box this close to the floor stands. max_offset: rad, largest servo-target offset.
+    max_speed: m/s, reference COM speed (horizontal) above which there is no feedback; the
+    gains fade linearly from full at half that speed (the ankle strategy is how one stands,
+    not how one walks: walking balances by where the feet land)."""
 
     frequency: float = 0.0
     damping: float = 1.0
     interval: int = 4
     stance_height: float = 0.03
     max_offset: float = 0.3
+    max_speed: float = 0.8
 
     def __post_init__(self) -> None:
         bad = [f"{n}={getattr(self, n)}" for n, ok in (
             ("frequency", self.frequency >= 0), ("damping", self.damping >= 0),
             ("interval", self.interval >= 1), ("stance_height", self.stance_height >= 0),
-            ("max_offset", self.max_offset > 0)) if not ok]
+            ("max_offset", self.max_offset > 0), ("max_speed", self.max_speed > 0)) if not ok]
         if bad:
             raise PhysposeError(f"balance gains out of range: {', '.join(bad)}",
                                 remedy="use frequency >= 0 Hz (0: off), damping >= 0, "
                                        "interval >= 1 step, stance_height >= 0 m, "
-                                       "max_offset > 0 rad")
+                                       "max_offset > 0 rad, max_speed > 0 m/s")
 
     @property
     def enabled(self) -> bool:
@@ -106,7 +110,7 @@ def balance_plan(model: mujoco.MjModel, reference: Reference, start_step: int, n
     last = reference.num_steps
 
     def com_at(step: int) -> np.ndarray:
-        data.qpos[:] = reference.qpos[min(max(step, 0), last)]
+        data.qpos[:] = reference.qpos[step]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
         return data.subtree_com[1].copy()  # body 1: the pelvis, root of the whole body
@@ -116,16 +120,18 @@ def balance_plan(model: mujoco.MjModel, reference: Reference, start_step: int, n
     com_vel = np.zeros((len(starts), 3))
     for c, s in enumerate(starts):
         step = min(start_step + int(s), last)
-        ahead, behind = com_at(step + 1), com_at(step - 1)
-        com_vel[c] = (ahead - behind) / (2 * reference.dt)
+        hi, lo = min(step + 1, last), max(step - 1, 0)
+        com_vel[c] = (com_at(hi) - com_at(lo)) / (max(hi - lo, 1) * reference.dt)
         com[c] = com_at(step)  # also leaves the kinematics of this step in data
+        speed = float(np.linalg.norm(com_vel[c, :2]))
+        scale = float(np.clip(2.0 * (gains.max_speed - speed) / gains.max_speed, 0.0, 1.0))
         standing = [side for side in ("l", "r")
                     if geom_lowest(model, data, foot_geoms[side]) < gains.stance_height]
-        for side in standing:
+        for side in standing if scale > 0 else ():
             for k in _BALANCE_DOFS[side]:
                 j = joint_ids[k]
                 moved = -np.cross(data.xaxis[j], com[c] - data.xanchor[j])
-                gain[c, k] = mass * moved[:2] / kp_servo[k] / len(standing)
+                gain[c, k] = scale * mass * moved[:2] / kp_servo[k] / len(standing)
     w = 2 * np.pi * gains.frequency
     return BalancePlan(starts=starts, gain=gain, com=com, com_vel=com_vel, kp=w * w,
                        kd=2 * gains.damping * w, max_offset=gains.max_offset)
