@@ -6,7 +6,8 @@ The input is a simulated motion (physpose.dynamics.synthetic: a weight shift and
 the benchmark needs no evaluation material. The fast preset runs the whole clip; the paper
 preset (2000 iterations x 100 samples per 1 s window) is timed on one 1 s window for a few
 iterations and extrapolated to its 2000 (reported as such). Rollout throughput (one-second
-rollouts per second, two threads) is printed for reference. Timings on a shared 2-core machine
+rollouts per second, two threads, open loop and under balance feedback) is printed for
+reference. Timings on a shared 2-core machine
 are noisy: compare ratios.
 """
 
@@ -23,24 +24,36 @@ import numpy as np
 
 from physpose.body import build_body, standing_qpos
 from physpose.dynamics import PRESETS, optimize_dynamics
+from physpose.dynamics.balance import BalanceGains, balance_plan
+from physpose.dynamics.init import Reference
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.shape import BodyShape
 
 
-def rollout_rate(body, batch: int = 32, seconds: float = 1.0, repeats: int = 3) -> float:
-    """One-second rollouts per second of wall time (two threads), standing body."""
+def rollout_rate(body, batch: int = 32, seconds: float = 1.0, repeats: int = 3,
+                 balance: bool = False) -> float:
+    """One-second rollouts per second of wall time (two threads), standing body; with
+    balance, under balance feedback at 0.5 Hz (chunked rollouts)."""
     sim = sim_model(body)
     q0 = standing_qpos(body)
     steps = int(round(seconds / sim.dt))
     ctrl = np.tile(q0[7:], (batch, steps, 1))
     ctrl += np.random.default_rng(0).normal(0.0, 0.02, ctrl.shape)
+    feedback = None
+    if balance:
+        still = Reference(dt=sim.dt, qpos=np.tile(q0, (steps + 1, 1)),
+                          qvel=np.zeros((steps + 1, sim.model.nv)),
+                          qacc=np.zeros((steps + 1, sim.model.nv)))
+        plan = balance_plan(sim.model, still, 0, steps, body.foot_geom_ids, body.kp,
+                            BalanceGains(frequency=0.5))
+        feedback = [(slice(0, batch), plan)]
     with Simulator(sim, nthread=2) as simulator:
         state0 = make_state(sim, q0, np.zeros(sim.model.nv))
         simulator.run(state0, ctrl[:2])
         start = time.perf_counter()
         for _ in range(repeats):
-            simulator.run(state0, ctrl)
+            simulator.run(state0, ctrl, feedback)
         elapsed = time.perf_counter() - start
     return batch * repeats * seconds / elapsed
 
@@ -59,7 +72,8 @@ def main() -> None:
     video_s = (fit.num_frames - 1) / fit.fps
     out = {"machine": f"{platform.machine()}, {os.cpu_count()} cores (shared)",
            "clip": f"simulated {args.motion}, {video_s:.2f} s at {fit.fps:g} fps",
-           "rollouts_per_s": rollout_rate(body)}
+           "rollouts_per_s": rollout_rate(body),
+           "rollouts_per_s_with_balance": rollout_rate(body, balance=True)}
 
     fast = PRESETS["fast"]
     start = time.perf_counter()
@@ -89,7 +103,8 @@ def main() -> None:
         "extrapolated_2000_iterations_s": res.timings["prepare"] + per_iteration * 2000}
 
     print(f"{out['clip']}; {out['machine']}")
-    print(f"rollouts: {out['rollouts_per_s']:.0f} one-second rollouts/s (2 threads)")
+    print(f"rollouts: {out['rollouts_per_s']:.0f} one-second rollouts/s (2 threads); "
+          f"{out['rollouts_per_s_with_balance']:.0f} with balance feedback (20 ms chunks)")
     f = out["fast"]
     print(f"fast preset: {f['wall_s']:.1f} s for {video_s:.2f} s of video = "
           f"{f['wall_s_per_video_s']:.1f} s per second ({f['windows']} windows, "

@@ -94,9 +94,9 @@ def test_flags_make_the_pipeline_config():
     assert default.dynamics.candidates == 1
     assert pipeline_config(_args("v.mp4", "--out", "o", "--candidates", "3")
                            ).dynamics.candidates == 3
-    assert default.dynamics.balance.frequency == 0.5
-    assert not pipeline_config(_args("v.mp4", "--out", "o", "--balance-hz", "0")
-                               ).dynamics.balance.enabled
+    assert not default.dynamics.balance.enabled
+    assert pipeline_config(_args("v.mp4", "--out", "o", "--balance-hz", "0.5")
+                           ).dynamics.balance.frequency == 0.5
 
 
 def test_export_formats():

@@ -55,8 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "the lowest loss: N times the time (default 1)")
     p.add_argument("--balance-hz", type=float, metavar="HZ",
                    help="closed-loop balance feedback (centre of mass through the standing "
-                        "ankles) in every simulated sample, Hz; 0 switches it off (default: "
-                        "0.5 in fast, off in paper)")
+                        "ankles) in every simulated sample, Hz, e.g. 0.5; 0 (the default) is "
+                        "off. Measured to help on standing and slow motions, to make walking "
+                        "feet slide (docs/dynamics.md)")
     g = p.add_argument_group("the person and the video")
     g.add_argument("--height", type=float, metavar="M", help="the person's standing height, m")
     g.add_argument("--mass", type=float, metavar="KG", help="the person's mass, kg")
