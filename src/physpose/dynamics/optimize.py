@@ -321,17 +321,14 @@ class _Search:
                                               axis=1) for c in ctrls])
         state0 = np.concatenate([np.repeat(p.state0[None], len(x), 0)
                                  for p, x in zip(problems, xs)])
-        feedback, row = [], 0
-        for p, x in zip(problems, xs):
-            if p.balance is not None:
-                feedback.append((slice(row, row + len(x)), p.balance))
-            row += len(x)
+        ends = np.cumsum([len(x) for x in xs])
+        rows = [slice(int(e) - len(x), int(e)) for e, x in zip(ends, xs)]  # each problem's
+        feedback = [(r, p.balance) for p, r in zip(problems, rows) if p.balance is not None]
         traj = self.simulator.run(state0, ctrl, feedback)
         t1 = time.perf_counter()
-        out, row = [], 0
-        for p, x in zip(problems, xs):
-            part = _slice(traj, slice(row, row + len(x)), p.window.num_steps)
-            row += len(x)
+        out = []
+        for p, r in zip(problems, rows):
+            part = _slice(traj, r, p.window.num_steps)
             scores, _ = score(p, part, self.setup.objective, self.cfg.weights,
                               self.cfg.max_root_distance, self.cfg.max_penetration)
             out.append((scores, part))
@@ -634,6 +631,7 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
     setup = _setup(sim, kinematic_fit, observations, config)  # the same for every seed
     timing["prepare"] = time.perf_counter() - t0
     run = _run_independent if config.independent else _run_sequential
+    inputs = run_inputs(body, kinematic_fit, observations) if checkpoints else None
     runs, table = [], []
     with Simulator(sim, config.nthread) as simulator:
         # Candidates: whole-clip runs with seeds seed, seed + 1, ..., each checkpointed as
@@ -647,7 +645,7 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
             if checkpoints:
                 # The key is a single run's: candidates only says how many seeds to try.
                 identity = {k: v for k, v in single.identity().items() if k != "candidates"}
-                key = checkpoint.run_key(identity, run_inputs(body, kinematic_fit, observations))
+                key = checkpoint.run_key(identity, inputs)
                 folder = checkpoint.run_folder(key, checkpoint_dir)
             outputs, ctrl, records = run(setup, simulator, single, folder, progress, timing)
             runs.append((outputs, ctrl, records))
