@@ -50,6 +50,10 @@ def test_result_shapes_and_records(clip):
         assert w["evaluations"] == 1 + TINY.iterations * (TINY.popsize + 1)
         assert w["loss_final"] <= w["loss_initial"]
         assert set(w["terms_final"]) == {"com", "pose", "reprojection", "prior", "tv", "lim"}
+    # The estimate's unexplained root force, per frame and per window (median over its steps).
+    assert res.reference_residual.shape == (t,) and (res.reference_residual >= 0).all()
+    assert all(0 <= w["reference_residual"] < 1 for w in res.windows)
+    assert set(res.reference_summary()) == {"root_residual_median", "root_residual_p90"}
     # The standing body keeps its feet on the floor and stays near the true motion.
     assert np.abs(res.foot_heights).max() < 0.01
     assert np.linalg.norm(res.joints - fit.joints, axis=-1).mean() < 0.03

@@ -9,7 +9,7 @@ import pytest
 
 from physpose.body import build_body, standing_qpos
 from physpose.dynamics.init import (ground_state, initial_coefficients,
-                                    inverse_dynamics_targets, smooth_reference)
+                                    inverse_dynamics, smooth_reference)
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
 from physpose.dynamics.spline import KnotGrid
 from physpose.dynamics.synthetic import motion_targets, simulated_clip
@@ -71,7 +71,8 @@ def test_inverse_dynamics_start_reproduces_a_simulated_motion(body):
     sim = sim_model(body)
     n = len(truth)
     ref = smooth_reference(fit.qpos, fit.fps, sim.dt, n, 0.1)
-    targets = inverse_dynamics_targets(sim.model, ref, body.foot_geom_ids, 0.9, 0.03)
+    needs = inverse_dynamics(sim.model, ref, body.foot_geom_ids, 0.9, 0.03)
+    targets = needs.targets
     assert np.abs(targets[:n] - truth).mean() < 0.005  # rad
     grid = KnotGrid(0.1, n * sim.dt)
     times = np.arange(n) * sim.dt
@@ -89,3 +90,19 @@ def test_inverse_dynamics_start_reproduces_a_simulated_motion(body):
                               - fit.joints, axis=-1).mean()
     assert held_err > err
     assert motion_targets(body, "shift", 1.0).shape == truth.shape
+
+
+def test_inverse_dynamics_measures_the_root_force_no_contact_explains(body):
+    """A simulated motion needs (almost) no push from nowhere; the same motion lifted 10 cm
+    off the floor needs its whole weight."""
+    fit, _, _ = simulated_clip(body, "shift", seconds=1.0)
+    sim = sim_model(body)
+    n = int(round(1.0 / sim.dt))
+    real = smooth_reference(fit.qpos, fit.fps, sim.dt, n, 0.1)
+    lifted = fit.qpos.copy()
+    lifted[:, 2] += 0.1
+    floating = smooth_reference(lifted, fit.fps, sim.dt, n, 0.1)
+    residual = [inverse_dynamics(sim.model, ref, body.foot_geom_ids, 0.9, 0.03).root_residual
+                for ref in (real, floating)]
+    assert np.median(residual[0]) < 0.02  # body weights
+    assert np.median(residual[1]) == pytest.approx(1.0, abs=0.02)

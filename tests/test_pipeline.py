@@ -55,6 +55,8 @@ def test_reconstruct_writes_the_contract(tmp_path):
     assert loaded.body_mjcf and "<mujoco" in loaded.body_mjcf
     assert loaded.landmarks_kinematic.shape == (t, 33, 3)
     assert set(loaded.meta["timings_s"]) == {"observe", "kinematics", "body", "dynamics"}
+    # A simulated motion is one the body can make: almost no unexplained root force.
+    assert loaded.meta["dynamics"]["reference"]["root_residual_median"] < 0.05
     resolved = json.loads((tmp_path / CONFIG_FILE).read_text())
     assert resolved["config"]["dynamics"]["iterations"] == cfg.dynamics.iterations
     assert any((tmp_path / "dynamics_windows").iterdir())

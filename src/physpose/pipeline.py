@@ -109,7 +109,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     meta = dict(recon.meta)
     meta.update(timings_s=timings, dynamics={"windows": phys.windows, "losses": phys.losses(),
                                             "timings": phys.timings,
-                                            "candidates": phys.candidates},
+                                            "candidates": phys.candidates,
+                                            "reference": phys.reference_summary()},
                 physpose_version=__version__)
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)

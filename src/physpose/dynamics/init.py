@@ -13,7 +13,8 @@ explained by ground forces at the sole points that are near the floor, solved as
 least squares on the edges of a linearised friction cone; what remains on the hinges is the
 motor torque, clipped to its limit, and the target that makes the servo produce it follows from the servo law in the model
 (``q + tau / kp`` for position servos whose damping is passive). A least-squares spline fit of these targets (clipped to the joint
-limits) gives the initial coefficients.
+limits) gives the initial coefficients. The root force the ground forces leave unexplained is
+kept as a measure of how far the estimate is from a motion the body can make.
 """
 
 from __future__ import annotations
@@ -142,9 +143,25 @@ def ground_forces(model: mujoco.MjModel, data: mujoco.MjData, wrench: np.ndarray
     return gen.T @ beta
 
 
-def inverse_dynamics_targets(model: mujoco.MjModel, ref: Reference, foot_geoms: dict[str, int],
-                             mu: float, contact_height: float) -> np.ndarray:
-    """Servo targets (N+1, 48) that make the servos produce the reference's motor torques.
+@dataclass(frozen=True, eq=False)
+class InverseDynamics:
+    """What the reference motion asks of the body, at steps 0..N.
+
+    targets (N+1, 48): servo targets that make the servos produce its motor torques.
+    root_residual (N+1,): the force on the root (in body weights, m g) that no ground force at
+    the sole points explains: a push from nowhere that the motion would need. A physically
+    consistent motion needs none; a noisy estimate does, and the simulated body, which gets no
+    such push, cannot follow it there.
+    """
+
+    targets: np.ndarray
+    root_residual: np.ndarray
+
+
+def inverse_dynamics(model: mujoco.MjModel, ref: Reference, foot_geoms: dict[str, int],
+                     mu: float, contact_height: float) -> InverseDynamics:
+    """Motor torques of the reference (contacts disabled, ground forces fitted at the soles),
+    turned into servo targets.
 
     Reads the servo law from the model: force = gain ctrl + bias0 + bias1 q + bias2 qdot,
     clipped to the force range; damping outside that law is passive and already in
@@ -155,17 +172,22 @@ def inverse_dynamics_targets(model: mujoco.MjModel, ref: Reference, foot_geoms: 
     data = mujoco.MjData(m)
     points = sole_points(m, foot_geoms)
     torques = np.empty((len(ref.qpos), m.nu))
+    residual = np.empty(len(ref.qpos))
     for n in range(len(ref.qpos)):
         data.qpos[:], data.qvel[:], data.qacc[:] = ref.qpos[n], ref.qvel[n], ref.qacc[n]
         mujoco.mj_inverse(m, data)
         need = data.qfrc_inverse.copy()
         need -= ground_forces(m, data, need[:6], points, mu, contact_height)
         torques[n] = need[6:]
+        residual[n] = np.linalg.norm(need[:3])  # the free joint's force, world frame (N)
     lo, hi = m.actuator_forcerange[:, 0], m.actuator_forcerange[:, 1]
     torques = np.clip(torques, lo, hi)
     gain, bias = m.actuator_gainprm[:, 0], m.actuator_biasprm[:, :3]
     q, qd = ref.qpos[:, 7:], ref.qvel[:, 6:]
-    return (torques - bias[:, 0] - bias[:, 1] * q - bias[:, 2] * qd) / gain
+    weight = float(np.sum(m.body_mass)) * float(np.linalg.norm(m.opt.gravity))
+    return InverseDynamics(
+        targets=(torques - bias[:, 0] - bias[:, 1] * q - bias[:, 2] * qd) / gain,
+        root_residual=residual / weight)
 
 
 def initial_coefficients(grid: KnotGrid, step_times: np.ndarray, targets: np.ndarray

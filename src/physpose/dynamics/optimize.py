@@ -34,7 +34,7 @@ from tqdm import tqdm
 from physpose.body import Body
 from physpose.dynamics import checkpoint
 from physpose.dynamics.init import (Reference, geom_lowest, ground_motion, ground_state,
-                                    initial_coefficients, inverse_dynamics_targets,
+                                    initial_coefficients, inverse_dynamics,
                                     smooth_reference)
 from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, make_reference)
 from physpose.dynamics.result import PhysicsResult, mean_window_loss
@@ -192,6 +192,7 @@ class _Setup:
     reference: Reference      # smoothed estimate on the step grid
     objective: ObjectiveReference
     step_times: np.ndarray    # (N,) s, time of each control step
+    root_residual: np.ndarray  # (N+1,) body weights, the estimate's unexplained root force
 
 
 def _check_inputs(kin: KinematicFit, obs: Observations) -> None:
@@ -225,16 +226,16 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
         flat = flatten_stance_feet(sim.model, grounded, fps, sim.body.foot_geom_ids)
         grounded = ground_motion(sim.model, flat, cfg.ground_snap)
     reference = smooth_reference(grounded, fps, dt, num_steps, cfg.reference_knot_spacing)
-    targets = inverse_dynamics_targets(sim.model, reference, sim.body.foot_geom_ids,
-                                       sim.body.scene.ground_friction, cfg.contact_height)
+    needs = inverse_dynamics(sim.model, reference, sim.body.foot_geom_ids,
+                             sim.body.scene.ground_friction, cfg.contact_height)
     step_times = np.arange(num_steps) * dt
     grid = KnotGrid(cfg.knot_spacing, num_steps * dt)
-    coefs0 = initial_coefficients(grid, step_times, targets[:num_steps])
+    coefs0 = initial_coefficients(grid, step_times, needs.targets[:num_steps])
     frame_steps = np.round(step_position(np.arange(kin.num_frames), fps, dt)).astype(int)
     objective = make_reference(sim.model, grounded, obs.keypoints2d, kin.camera_K,
                                kin.T_world2cam, fps, smooth_qpos=reference.qpos[frame_steps])
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
-                  objective=objective, step_times=step_times)
+                  objective=objective, step_times=step_times, root_residual=needs.root_residual)
 
 
 def _kinematic_state(setup: _Setup, step: int, snap: float) -> np.ndarray:
@@ -654,6 +655,13 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
                           "loss": mean_window_loss(records) if valid else float("inf")})
     k = min(range(len(runs)), key=lambda j: table[j]["loss"])
     outputs, ctrl, records = runs[k]
+    # The estimate's unexplained root force: the median over each window's steps, and per frame.
+    residual = setup.root_residual
+    records = [dict(r, reference_residual=float(np.median(residual[r["steps"][0]:
+                                                                    r["steps"][1] + 1])))
+               for r in records]
+    frame_steps = np.round(step_position(np.arange(kinematic_fit.num_frames), kinematic_fit.fps,
+                                         sim.dt)).astype(int)
     timing["total"] = time.perf_counter() - t0
     timing["search"] = sum(r["seconds"] for _, _, recs in runs for r in recs)
     candidates = [dict(row, kept=j == k) for j, row in enumerate(table)] \
@@ -662,4 +670,5 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
         fps=kinematic_fit.fps, qpos=outputs["qpos"], joints=outputs["joints"],
         landmarks=outputs["landmarks"], com=outputs["com"],
         foot_heights=foot_heights(sim.model, outputs["qpos"], body.foot_geom_ids), ctrl=ctrl,
-        windows=records, timings=timing, config=config.identity(), candidates=candidates)
+        windows=records, timings=timing, config=config.identity(), candidates=candidates,
+        reference_residual=residual[np.minimum(frame_steps, len(residual) - 1)])

@@ -19,7 +19,10 @@ class PhysicsResult:
     windows: one record per window (frames, steps, evaluations, initial and final loss and
     terms, seconds). timings: seconds per sub-step. config: the resolved DynamicsConfig.
     candidates: with DynamicsConfig.candidates > 1, one row per whole-clip run (seed, mean
-    window loss, kept); empty otherwise.
+    window loss, kept); empty otherwise. reference_residual (T,): the root force, in body
+    weights, that the kinematic estimate needs and no ground contact explains (inverse dynamics
+    of the smoothed estimate; 0 for a motion the body can make). Where it is large the
+    simulated body cannot follow the estimate (docs/dynamics.md, "Consistency of the estimate").
     """
 
     fps: float
@@ -33,6 +36,7 @@ class PhysicsResult:
     timings: dict = dataclasses.field(default_factory=dict)
     config: dict = dataclasses.field(default_factory=dict)
     candidates: list[dict] = dataclasses.field(default_factory=list)
+    reference_residual: np.ndarray | None = None
 
     @property
     def num_frames(self) -> int:
@@ -46,6 +50,14 @@ class PhysicsResult:
         out = {n: float(np.mean([w["terms_final"][n] for w in self.windows])) for n in names}
         out["total"] = mean_window_loss(self.windows)
         return out
+
+    def reference_summary(self) -> dict[str, float]:
+        """Median and 90th percentile over frames of ``reference_residual`` (body weights)."""
+        if self.reference_residual is None or not len(self.reference_residual):
+            return {}
+        r = np.asarray(self.reference_residual, dtype=float)
+        return {"root_residual_median": float(np.median(r)),
+                "root_residual_p90": float(np.percentile(r, 90))}
 
 
 def mean_window_loss(windows: list[dict]) -> float:
