@@ -40,6 +40,7 @@ def _args(*argv: str):
     (["--height", "9"], "height 9.0 m is outside"),
     (["--candidates", "0"], "candidates must be >= 1"),
     (["--balance-hz", "-1"], "balance gains"),
+    (["--com-weight", "-1"], "COM weight -1.0 must be a number >= 0"),
     (["--fps", "1000"], "outside"),
     (["--camera", "{missing}.json"], "camera file not found"),
     (["--camera", "{bad_json}"], "cannot read camera intrinsics"),
@@ -97,6 +98,9 @@ def test_flags_make_the_pipeline_config():
     assert not default.dynamics.balance.enabled
     assert pipeline_config(_args("v.mp4", "--out", "o", "--balance-hz", "0.5")
                            ).dynamics.balance.frequency == 0.5
+    assert default.dynamics.weights.com == 0.0
+    paper_com = pipeline_config(_args("v.mp4", "--out", "o", "--com-weight", "15")).dynamics
+    assert paper_com.weights.com == 15.0 and paper_com.weights.pose == default.dynamics.weights.pose
 
 
 def test_export_formats():

@@ -12,6 +12,7 @@ from physpose.body import build_body
 from physpose.dynamics import ABLATIONS, PRESETS, DynamicsConfig, ablated, optimize_dynamics
 from physpose.dynamics import checkpoint
 from physpose.dynamics.balance import BalanceGains
+from physpose.dynamics.objective import ObjectiveWeights
 from physpose.dynamics.optimize import _cma, _window_seed
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.dynamics.windows import blend_weights, plan_windows
@@ -191,8 +192,12 @@ def test_independent_windows_are_blended(clip):
 def test_presets_and_ablations():
     assert PRESETS["paper"].popsize == 100 and PRESETS["paper"].iterations == 2000
     assert PRESETS["paper"].window == 1.0
+    # The paper preset keeps the paper's weights; the fast one drops the COM term.
+    assert PRESETS["paper"].weights.as_dict() == ObjectiveWeights().as_dict()
+    assert PRESETS["fast"].weights.com == 0.0 and PRESETS["fast"].weights.pose == 0.5
+    full = dataclasses.replace(PRESETS["fast"], weights=ObjectiveWeights())
     for name, terms in ABLATIONS.items():
-        w = ablated(PRESETS["fast"], name).weights
+        w = ablated(full, name).weights
         for term in terms:
             assert getattr(w, term) == 0.0
         assert sum(getattr(w, t) > 0 for t in ("com", "pose", "reprojection", "prior")) \

@@ -58,6 +58,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "ankles) in every simulated sample, Hz, e.g. 0.5; 0 (the default) is "
                         "off. Measured to help on standing and slow motions, to make walking "
                         "feet slide (docs/dynamics.md)")
+    p.add_argument("--com-weight", type=float, metavar="W",
+                   help="weight of the objective's centre-of-mass term (the paper's 15; the "
+                        "fast preset's 0: measured to keep the pose closer to the video, with "
+                        "more restarts from the estimate; docs/dynamics.md)")
     g = p.add_argument_group("the person and the video")
     g.add_argument("--height", type=float, metavar="M", help="the person's standing height, m")
     g.add_argument("--mass", type=float, metavar="KG", help="the person's mass, kg")
@@ -128,6 +132,13 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     dynamics = config.dynamics
     if args.candidates is not None:
         dynamics = dataclasses.replace(dynamics, candidates=args.candidates)
+    if args.com_weight is not None:
+        if not (np.isfinite(args.com_weight) and args.com_weight >= 0):
+            raise PhysposeError(f"COM weight {args.com_weight} must be a number >= 0",
+                                remedy="give --com-weight 0 (the fast preset's) to 15 (the "
+                                       "paper's), or leave it out")
+        dynamics = dataclasses.replace(dynamics, weights=dataclasses.replace(
+            dynamics.weights, com=args.com_weight))
     if args.balance_hz is not None:
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))
