@@ -195,6 +195,7 @@ class _Setup:
     reference: Reference      # smoothed estimate on the step grid
     objective: ObjectiveReference
     step_times: np.ndarray    # (N,) s, time of each control step
+    frame_steps: np.ndarray   # (T,) the simulation step nearest each frame
     root_residual: np.ndarray  # (N+1,) body weights, the estimate's unexplained root force
 
 
@@ -238,7 +239,8 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
     objective = make_reference(sim.model, grounded, obs.keypoints2d, kin.camera_K,
                                kin.T_world2cam, fps, smooth_qpos=reference.qpos[frame_steps])
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
-                  objective=objective, step_times=step_times, root_residual=needs.root_residual)
+                  objective=objective, step_times=step_times, frame_steps=frame_steps,
+                  root_residual=needs.root_residual)
 
 
 def _kinematic_state(setup: _Setup, step: int, snap: float) -> np.ndarray:
@@ -663,8 +665,6 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
     records = [dict(r, reference_residual=float(np.median(residual[r["steps"][0]:
                                                                     r["steps"][1] + 1])))
                for r in records]
-    frame_steps = np.round(step_position(np.arange(kinematic_fit.num_frames), kinematic_fit.fps,
-                                         sim.dt)).astype(int)
     timing["total"] = time.perf_counter() - t0
     timing["search"] = sum(r["seconds"] for _, _, recs in runs for r in recs)
     candidates = [dict(row, kept=j == k) for j, row in enumerate(table)] \
@@ -674,4 +674,4 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
         landmarks=outputs["landmarks"], com=outputs["com"],
         foot_heights=foot_heights(sim.model, outputs["qpos"], body.foot_geom_ids), ctrl=ctrl,
         windows=records, timings=timing, config=config.identity(), candidates=candidates,
-        reference_residual=residual[np.minimum(frame_steps, len(residual) - 1)])
+        reference_residual=residual[setup.frame_steps])
