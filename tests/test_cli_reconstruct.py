@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -11,6 +12,8 @@ import pytest
 from physpose.cli import SUBCOMMANDS, build_parser, main
 from physpose.cli.reconstruct import (camera_intrinsics, parse_formats, pipeline_config,
                                       print_summary)
+from physpose.dynamics import PRESETS
+from physpose.dynamics.objective import ObjectiveWeights
 from physpose.errors import PhysposeError
 from synthetic_result import make_reconstruction, save_result, write_video
 
@@ -40,7 +43,10 @@ def _args(*argv: str):
     (["--height", "9"], "height 9.0 m is outside"),
     (["--candidates", "0"], "candidates must be >= 1"),
     (["--balance-hz", "-1"], "balance gains"),
-    (["--com-weight", "-1"], "COM weight -1.0 must be a number >= 0"),
+    (["--weight", "com=-1"], "the weight must be a number >= 0"),
+    (["--weight", "com=heavy"], "the weight must be a number >= 0"),
+    (["--weight", "balance=1"], "names no objective term"),
+    (["--weight", "15"], "names no objective term"),
     (["--fps", "1000"], "outside"),
     (["--camera", "{missing}.json"], "camera file not found"),
     (["--camera", "{bad_json}"], "cannot read camera intrinsics"),
@@ -98,9 +104,12 @@ def test_flags_make_the_pipeline_config():
     assert not default.dynamics.balance.enabled
     assert pipeline_config(_args("v.mp4", "--out", "o", "--balance-hz", "0.5")
                            ).dynamics.balance.frequency == 0.5
-    assert default.dynamics.weights.com == 0.0
-    paper_com = pipeline_config(_args("v.mp4", "--out", "o", "--com-weight", "15")).dynamics
-    assert paper_com.weights.com == 15.0 and paper_com.weights.pose == default.dynamics.weights.pose
+    assert default.dynamics.weights == PRESETS["fast"].weights
+    paper = pipeline_config(_args("v.mp4", "--out", "o", "--weight", "com=15",
+                                  "--weight", "POSE = 0.5")).dynamics.weights
+    assert paper == ObjectiveWeights()  # the paper's weights
+    no_tv = pipeline_config(_args("v.mp4", "--out", "o", "--weight", "tv=0")).dynamics.weights
+    assert no_tv == dataclasses.replace(PRESETS["fast"].weights, tv=0.0)
 
 
 def test_export_formats():

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from physpose.dynamics import PRESETS
+from physpose.dynamics.objective import TERMS, ObjectiveWeights
 from physpose.errors import PhysposeError
 from physpose.export import FORMATS
 from physpose.keypoints_io import is_keypoints_file
@@ -58,10 +59,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "ankles) in every simulated sample, Hz, e.g. 0.5; 0 (the default) is "
                         "off. Measured to help on standing and slow motions, to make walking "
                         "feet slide (docs/dynamics.md)")
-    p.add_argument("--com-weight", type=float, metavar="W",
-                   help="weight of the objective's centre-of-mass term (the paper's 15; the "
-                        "fast preset's 0: measured to keep the pose closer to the video, with "
-                        "more restarts from the estimate; docs/dynamics.md)")
+    p.add_argument("--weight", action="append", default=[], metavar="TERM=W",
+                   help="weight of one objective term, repeatable; terms: "
+                        f"{', '.join(TERMS)}. The paper's weights are com=15 pose=0.5 "
+                        "reprojection=4 prior=1 tv=1 lim=1; the fast preset sets com=0. E.g. "
+                        "--weight pose=4: closer to the estimate's pose, feet slide more "
+                        "(measured trade-off in docs/dynamics.md)")
     g = p.add_argument_group("the person and the video")
     g.add_argument("--height", type=float, metavar="M", help="the person's standing height, m")
     g.add_argument("--mass", type=float, metavar="KG", help="the person's mass, kg")
@@ -122,6 +125,26 @@ def scene_config(args: argparse.Namespace) -> SceneConfig:
     return dataclasses.replace(scene, obstacles=obstacles) if obstacles else scene
 
 
+def parse_weights(texts: list[str], weights: ObjectiveWeights) -> ObjectiveWeights:
+    """``weights`` with the terms named in ``texts`` ("TERM=W", e.g. "com=15") replaced."""
+    changes = {}
+    for text in texts:
+        term, sep, value = text.partition("=")
+        term = term.strip().lower()
+        if not sep or term not in TERMS:
+            raise PhysposeError(f"--weight {text!r} names no objective term",
+                                remedy=f"write TERM=W with TERM one of {', '.join(TERMS)}, "
+                                       "e.g. --weight com=15")
+        try:
+            changes[term] = float(value)
+        except ValueError:
+            changes[term] = float("nan")
+        if not (np.isfinite(changes[term]) and changes[term] >= 0):
+            raise PhysposeError(f"--weight {text!r}: the weight must be a number >= 0",
+                                remedy=f"e.g. --weight {term}=1 (0 removes the term)")
+    return dataclasses.replace(weights, **changes)
+
+
 def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     """The composed config of the flags (validated, before any heavy work)."""
     config = PipelineConfig.preset(args.preset)
@@ -132,13 +155,9 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     dynamics = config.dynamics
     if args.candidates is not None:
         dynamics = dataclasses.replace(dynamics, candidates=args.candidates)
-    if args.com_weight is not None:
-        if not (np.isfinite(args.com_weight) and args.com_weight >= 0):
-            raise PhysposeError(f"COM weight {args.com_weight} must be a number >= 0",
-                                remedy="give --com-weight 0 (the fast preset's) to 15 (the "
-                                       "paper's), or leave it out")
-        dynamics = dataclasses.replace(dynamics, weights=dataclasses.replace(
-            dynamics.weights, com=args.com_weight))
+    if args.weight:
+        dynamics = dataclasses.replace(dynamics, weights=parse_weights(args.weight,
+                                                                       dynamics.weights))
     if args.balance_hz is not None:
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))
