@@ -47,6 +47,7 @@ def _args(*argv: str):
     (["--weight", "com=heavy"], "the weight must be a number >= 0"),
     (["--weight", "balance=1"], "names no objective term"),
     (["--weight", "15"], "names no objective term"),
+    (["--weight", "pose"], "'pose' has no value"),
     (["--fps", "1000"], "outside"),
     (["--camera", "{missing}.json"], "camera file not found"),
     (["--camera", "{bad_json}"], "cannot read camera intrinsics"),

@@ -131,7 +131,10 @@ def parse_weights(texts: list[str], weights: ObjectiveWeights) -> ObjectiveWeigh
     for text in texts:
         term, sep, value = text.partition("=")
         term = term.strip().lower()
-        if not sep or term not in TERMS:
+        if not sep and term in TERMS:
+            raise PhysposeError(f"--weight {text!r} has no value",
+                                remedy=f"write TERM=W, e.g. --weight {term}=1")
+        if term not in TERMS:
             raise PhysposeError(f"--weight {text!r} names no objective term",
                                 remedy=f"write TERM=W with TERM one of {', '.join(TERMS)}, "
                                        "e.g. --weight com=15")
