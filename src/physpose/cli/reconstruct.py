@@ -63,7 +63,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="weight of one objective term, repeatable; terms: "
                         f"{', '.join(TERMS)}. The paper's weights are com=15 pose=0.5 "
                         "reprojection=4 prior=1 tv=1 lim=1; the fast preset sets com=0. E.g. "
-                        "--weight pose=4: closer to the estimate's pose, feet slide more "
+                        "--weight pose=8: closer to the estimate's pose, feet slide more "
                         "(measured trade-off in docs/dynamics.md)")
     g = p.add_argument_group("the person and the video")
     g.add_argument("--height", type=float, metavar="M", help="the person's standing height, m")
@@ -139,12 +139,13 @@ def parse_weights(texts: list[str], weights: ObjectiveWeights) -> ObjectiveWeigh
                                 remedy=f"write TERM=W with TERM one of {', '.join(TERMS)}, "
                                        "e.g. --weight com=15")
         try:
-            changes[term] = float(value)
+            weight = float(value)
         except ValueError:
-            changes[term] = float("nan")
-        if not (np.isfinite(changes[term]) and changes[term] >= 0):
+            weight = float("nan")
+        if not (np.isfinite(weight) and weight >= 0):
             raise PhysposeError(f"--weight {text!r}: the weight must be a number >= 0",
                                 remedy=f"e.g. --weight {term}=1 (0 removes the term)")
+        changes[term] = weight
     return dataclasses.replace(weights, **changes)
 
 
