@@ -15,6 +15,7 @@ from physpose.dynamics.balance import BalanceGains
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.dynamics.optimize import _cma, _window_seed
 from physpose.dynamics.synthetic import simulated_clip
+from physpose.dynamics.variants import FULL_OBJECTIVE
 from physpose.dynamics.windows import blend_weights, plan_windows
 from physpose.errors import PhysposeError
 from physpose.shape import BodyShape
@@ -195,9 +196,9 @@ def test_presets_and_ablations():
     # The paper preset keeps the paper's weights; the fast one drops the COM term.
     assert PRESETS["paper"].weights.as_dict() == ObjectiveWeights().as_dict()
     assert PRESETS["fast"].weights.com == 0.0 and PRESETS["fast"].weights.pose == 0.5
-    full = dataclasses.replace(PRESETS["fast"], weights=ObjectiveWeights())
+    assert FULL_OBJECTIVE == dataclasses.replace(PRESETS["fast"], weights=ObjectiveWeights())
     for name, terms in ABLATIONS.items():
-        w = ablated(full, name).weights
+        w = ablated(FULL_OBJECTIVE, name).weights
         for term in terms:
             assert getattr(w, term) == 0.0
         assert sum(getattr(w, t) > 0 for t in ("com", "pose", "reprojection", "prior")) \

@@ -127,7 +127,6 @@ def scene_config(args: argparse.Namespace) -> SceneConfig:
 
 def parse_weights(texts: list[str], weights: ObjectiveWeights) -> ObjectiveWeights:
     """``weights`` with the terms named in ``texts`` ("TERM=W", e.g. "com=15") replaced."""
-    changes = {}
     for text in texts:
         term, sep, value = text.partition("=")
         term = term.strip().lower()
@@ -138,15 +137,12 @@ def parse_weights(texts: list[str], weights: ObjectiveWeights) -> ObjectiveWeigh
             raise PhysposeError(f"--weight {text!r} names no objective term",
                                 remedy=f"write TERM=W with TERM one of {', '.join(TERMS)}, "
                                        "e.g. --weight com=15")
-        try:
-            weight = float(value)
+        try:  # not a number, or one ObjectiveWeights rejects (negative, not finite)
+            weights = dataclasses.replace(weights, **{term: float(value)})
         except ValueError:
-            weight = float("nan")
-        if not (np.isfinite(weight) and weight >= 0):
             raise PhysposeError(f"--weight {text!r}: the weight must be a number >= 0",
-                                remedy=f"e.g. --weight {term}=1 (0 removes the term)")
-        changes[term] = weight
-    return dataclasses.replace(weights, **changes)
+                                remedy=f"e.g. --weight {term}=1 (0 removes the term)") from None
+    return weights
 
 
 def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
