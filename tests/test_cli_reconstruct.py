@@ -11,7 +11,7 @@ import pytest
 
 from physpose.cli import SUBCOMMANDS, build_parser, main
 from physpose.cli.reconstruct import (camera_intrinsics, parse_formats, pipeline_config,
-                                      print_summary)
+                                      print_summary, restarts_line)
 from physpose.dynamics import PRESETS
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.errors import PhysposeError
@@ -154,6 +154,25 @@ def test_summary_lists_metrics_files_and_times(tmp_path, capsys):
     assert "float (% frames)" in out and "12.5" in out
     assert "report.html" in out and "reconstruction.npz" in out
     assert "dynamics 3.5 s" in out and "total 6.5 s" in out
+
+
+def test_summary_says_where_the_physics_restarted_from_the_estimate(capsys):
+    windows = [{"frames": [0, 25], "reset_after": False}, {"frames": [10, 35], "reset_after": True},
+               {"frames": [22, 47], "reset_after": False}, {"frames": [32, 49]}]
+    recon = make_reconstruction(num_frames=5, meta={"dynamics": {"windows": windows}})
+    assert recon.restarts == [22]  # read from the window records (older results)
+    assert "restarted from the kinematic estimate once" in restarts_line(recon)
+    assert "frame 22 (0.88 s)" in restarts_line(recon)
+    recon = recon.replace(meta={"dynamics": {"windows": windows, "restarts": [22, 40]}})
+    assert recon.restarts == [22, 40]
+    assert "2 times" in restarts_line(recon) and "frames 22 (0.88 s), 40 (1.60 s)" \
+        in restarts_line(recon)
+    calm = recon.replace(meta={"dynamics": {"windows": windows[:1], "restarts": []}})
+    print_summary(calm, Path("out"), {}, None, {})
+    assert "one continuous simulation (no restarts)" in capsys.readouterr().out
+    print_summary(recon.replace(joints_physics=None, landmarks_physics=None, qpos_physics=None),
+                  Path("out"), {}, None, {})
+    assert "restart" not in capsys.readouterr().out  # no physics, nothing to say
 
 
 @pytest.mark.parametrize("command", [None, *SUBCOMMANDS])

@@ -136,7 +136,8 @@ def test_a_window_left_far_from_the_estimate_hands_on_a_restart(clip):
         w, following = res.windows[i], res.windows[i + 1]
         assert w["cut_at"] == following["frames"][0] if w["cut_at"] is not None \
             else w["handover_error"] > cfg.reset_distance
-    restart = res.windows[resets[-1] + 1]["frames"][0]
+    assert res.restarts == [res.windows[i + 1]["frames"][0] for i in resets]
+    restart = res.restarts[-1]
     assert abs(res.qpos[restart, 0] - jumped[restart, 0]) < 0.05
     assert len(res.qpos) == len(jumped) and np.isfinite(res.qpos).all()
 

@@ -10,8 +10,8 @@ import pytest
 import physpose.report as report
 from physpose.errors import PhysposeError
 from physpose.report import build_report
-from physpose.report.data import window_losses
-from synthetic_result import save_result
+from physpose.report.data import report_data, summary_rows, window_losses
+from synthetic_result import make_reconstruction, save_result
 
 needs_bundle = pytest.mark.skipif(not report.BUNDLE.is_file(),
                                   reason="viewer bundle not built; run `make setup` (make web)")
@@ -91,3 +91,17 @@ def test_window_losses_read_the_dynamics_stage_windows():
     assert spec["series"][0]["y"] == [0.2, 0.1]
     no_fps = window_losses({"dynamics": {"windows": windows}})
     assert no_fps["x"] == [0.0, 1.0] and no_fps["xlabel"] == "window"
+
+
+def test_restarts_are_marked_on_the_gap_plot_and_in_the_summary(tmp_path):
+    rec = make_reconstruction(num_frames=12, meta={"dynamics": {"windows": [], "restarts": [4, 9]}})
+    gap = next(p for p in report_data(rec)["plots"] if p["id"] == "gap")
+    (band,) = gap["bands"]
+    assert [i for i, on in enumerate(band["on"]) if on] == [4, 9] and "restart" in band["name"]
+    rows = dict(summary_rows(rec, tmp_path))
+    restarts = rows["physics restarts"]
+    assert restarts.startswith("2,") and "0.16 s, 0.36 s" in restarts
+    calm = rec.replace(meta={"dynamics": {"restarts": []}})
+    assert dict(summary_rows(calm, tmp_path))["physics restarts"].startswith("none")
+    kinematic = rec.replace(joints_physics=None, landmarks_physics=None, qpos_physics=None)
+    assert "physics restarts" not in dict(summary_rows(kinematic, tmp_path))

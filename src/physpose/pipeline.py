@@ -110,6 +110,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     meta.update(timings_s=timings, dynamics={"windows": phys.windows, "losses": phys.losses(),
                                             "timings": phys.timings,
                                             "candidates": phys.candidates,
+                                            "restarts": phys.restarts,
                                             "reference": phys.reference_summary()},
                 physpose_version=__version__)
     recon = recon.replace(meta=meta)

@@ -21,6 +21,14 @@ _REQUIRED = ("fps", "joint_names", "joints_kinematic", "camera_K", "camera_T_wor
 _OPTIONAL = ("joints_physics", "qpos_physics", "landmarks_physics", "body_mjcf", "qpos_kinematic")
 
 
+def restart_frames(windows: list[dict]) -> list[int]:
+    """Frames at which a sequential dynamics run restarted from the kinematic state because
+    the simulated body had strayed: the first frame of the window after one marked
+    ``reset_after``. The motion is not one simulation across such a frame; it jumps there."""
+    return [int(windows[i + 1]["frames"][0]) for i, w in enumerate(windows[:-1])
+            if isinstance(w, dict) and w.get("reset_after")]
+
+
 @dataclass(frozen=True, eq=False)
 class Reconstruction:
     """World-frame motion (z up, ground z = 0, metres) at the analysis frame rate."""
@@ -65,6 +73,15 @@ class Reconstruction:
     @property
     def has_physics(self) -> bool:
         return self.joints_physics is not None
+
+    @property
+    def restarts(self) -> list[int]:
+        """Frames at which the physics motion restarts from the kinematic estimate (it jumps
+        there), from meta["dynamics"]; empty without physics or restarts."""
+        dynamics = self.meta.get("dynamics") or {}
+        if "restarts" in dynamics:
+            return [int(f) for f in dynamics["restarts"]]
+        return restart_frames(dynamics.get("windows") or [])
 
     def joints(self, which: str = "best") -> np.ndarray:
         """(T, J, 3) physics joints if present (or which='physics'), else kinematic."""

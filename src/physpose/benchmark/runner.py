@@ -42,7 +42,7 @@ def run_variant(name: str, clip: Clip) -> dict:
     metrics, ground = score_clip(clip, recon)
     windows = recon.meta.get("dynamics", {}).get("windows")
     if windows is not None:  # windows restarted from the kinematic state: jumps, not physics
-        metrics["restarts"] = float(sum(bool(w.get("reset_after")) for w in windows))
+        metrics["restarts"] = float(len(recon.restarts))
     stages = {stage: float(s) for stage, s in recon.meta.get("timings_s", {}).items()}
     return {
         "variant": name, "kind": clip.kind, "clip": clip.name, "source": clip.source,

@@ -237,12 +237,26 @@ def _fits(camera, image_size: tuple[int, int]) -> bool:
     return True
 
 
+def restarts_line(recon: Reconstruction) -> str:
+    """One line on where the physics motion restarts from the kinematic estimate (jumps)."""
+    frames = recon.restarts
+    if not frames:
+        return "physics: one continuous simulation (no restarts)"
+    where = ", ".join(f"{f} ({f / recon.fps:.2f} s)" for f in frames)
+    times = "once" if len(frames) == 1 else f"{len(frames)} times"
+    return (f"physics: restarted from the kinematic estimate {times}, where the simulated body "
+            f"had strayed from it; the motion jumps at frame{'s' * (len(frames) > 1)} {where} "
+            "(docs/dynamics.md, Retries)")
+
+
 def print_summary(recon: Reconstruction, out: Path, written: dict[str, Path],
                   metrics: dict | None, timings: dict[str, float]) -> None:
     """The end-of-run summary: metrics table, files and time per stage."""
     motions = "physics and kinematic motion" if recon.has_physics else "kinematic motion only"
     print(f"\n{recon.num_frames} frames at {recon.fps:g} fps ({recon.num_frames / recon.fps:.2f}"
           f" s), {motions}")
+    if recon.has_physics:
+        print(restarts_line(recon))
     if metrics:
         print("\nmetrics (no ground truth needed; docs/metrics.md):")
         print(metrics_table(metrics))

@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from physpose.reconstruction import restart_frames
+
 
 @dataclass(frozen=True, eq=False)
 class PhysicsResult:
@@ -23,6 +25,7 @@ class PhysicsResult:
     weights, that the kinematic estimate needs and no ground contact explains (inverse dynamics
     of the smoothed estimate; 0 for a motion the body can make). Where it is large the
     simulated body cannot follow the estimate (docs/dynamics.md, "Consistency of the estimate").
+    `restarts`: the frames at which the motion restarts from the kinematic estimate.
     """
 
     fps: float
@@ -41,6 +44,11 @@ class PhysicsResult:
     @property
     def num_frames(self) -> int:
         return int(self.qpos.shape[0])
+
+    @property
+    def restarts(self) -> list[int]:
+        """Frames at which the run restarted from the kinematic state (`restart_frames`)."""
+        return restart_frames(self.windows)
 
     def losses(self) -> dict[str, float]:
         """Final loss terms averaged over windows (unweighted), plus the weighted total."""
@@ -63,3 +71,4 @@ class PhysicsResult:
 def mean_window_loss(windows: list[dict]) -> float:
     """The windows' final weighted losses, averaged (unweighted by length)."""
     return float(np.mean([w["loss_final"] for w in windows]))
+

@@ -85,9 +85,13 @@ def _plots(rec: Reconstruction, bodies: dict[str, BodyMotion | None]) -> list[di
                       "ylabel": "m", "x": time, "series": com, "cursor": True})
     if rec.has_physics:
         gap = np.linalg.norm(rec.joints_physics - rec.joints_kinematic, axis=-1).mean(axis=1)
+        restarts = np.zeros(rec.num_frames, dtype=bool)
+        restarts[[f for f in rec.restarts if 0 <= f < rec.num_frames]] = True
         plots.append({"id": "gap", "title": "Physics vs kinematic (mean joint distance)",
                       "xlabel": "time (s)", "ylabel": "cm", "x": time, "cursor": True,
-                      "series": [{"name": "distance", "y": _r(100 * gap), "color": "#444"}]})
+                      "series": [{"name": "distance", "y": _r(100 * gap), "color": "#444"}],
+                      "bands": [{"name": "restart from the estimate (a jump)",
+                                 "on": restarts.tolist(), "color": "#c0392b"}]})
     losses = window_losses(rec.meta, rec.fps)
     if losses is not None:
         plots.append(losses)
@@ -152,4 +156,9 @@ def summary_rows(rec: Reconstruction, folder: Path) -> list[tuple[str, str]]:
     source = rec.meta.get("source")
     if source:
         rows.insert(1, ("video", str(source)))
+    if rec.has_physics:
+        frames = rec.restarts
+        rows.append(("physics restarts", "none: one continuous simulation" if not frames else
+                     f"{len(frames)}, where the motion jumps back to the estimate: "
+                     + ", ".join(f"{f / rec.fps:.2f} s" for f in frames)))
     return rows
