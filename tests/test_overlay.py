@@ -9,7 +9,8 @@ import pytest
 from physpose.errors import PhysposeError
 from physpose.reconstruction import Reconstruction
 from physpose.render.draw import project
-from physpose.render.overlay import (COLORS, OverlayConfig, render_overlay, save_overlay_png)
+from physpose.render.overlay import (COLORS, RESTART_COLOR, OverlayConfig, render_overlay,
+                                     save_overlay_png)
 from synthetic_result import FPS, IMAGE_SIZE, make_reconstruction, write_video
 
 CFG = OverlayConfig(height=240)  # panel height = the synthetic video's height: scale 1
@@ -79,6 +80,20 @@ def test_bodies_are_drawn_where_the_camera_projects_them(tmp_path):
     assert min(np.abs(near - np.array(c)).sum(axis=1).min() for c in COLORS.values()) < 30
     # The 3d view is not empty: its pixels vary (grid and body).
     assert png[:, IMAGE_SIZE[0]:].std() > 5
+
+
+def test_a_physics_restart_is_announced_on_the_frames_after_it(tmp_path):
+    rec = make_reconstruction(num_frames=30, meta={"dynamics": {"restarts": [10]}})
+    rec.save(tmp_path / "r" / "reconstruction.npz")
+    notice = (slice(36 + 20 * 3 + 4, 36 + 20 * 3 + 20), slice(8, 290))  # below the legend
+    red = np.array(RESTART_COLOR)
+
+    def shown(t):
+        png = cv2.imread(str(save_overlay_png(tmp_path / "r", t, tmp_path / "f.png", cfg=CFG)))
+        return (np.abs(png[notice].astype(int) - red).sum(axis=-1) < 30).mean() > 0.5
+
+    # 0.4 s at 25 fps: frames 10-19 carry the notice, not the frames before or after.
+    assert [shown(t) for t in (9, 10, 19, 20)] == [False, True, True, False]
 
 
 def test_kinematic_only_result_without_body_or_video(tmp_path):

@@ -33,6 +33,8 @@ CONTACT_COLOR = (94, 36, 224)  # BGR
 _BACKGROUND = (48, 48, 48)     # BGR, when there is no video
 _VIEW_BACKGROUND = (245, 241, 238)
 _GRID_COLOR = (190, 184, 178)
+RESTART_COLOR = (43, 57, 192)  # BGR, red: the physics motion jumped back to the estimate
+RESTART_SHOWN_S = 0.4          # s the restart notice stays up (a jump is one frame)
 
 
 @dataclass(frozen=True)
@@ -64,6 +66,7 @@ class _Scene:
     feet_xy: dict[str, np.ndarray]      # (T, 2, 2) per motion
     edges: np.ndarray
     image_size: tuple[int, int]
+    restarting: np.ndarray              # (T,) bool: within RESTART_SHOWN_S of a physics restart
 
 
 def _scene(rec: Reconstruction, image_size: tuple[int, int]) -> _Scene:
@@ -75,7 +78,19 @@ def _scene(rec: Reconstruction, image_size: tuple[int, int]) -> _Scene:
         samples={m: [geom_samples(g) for g in b.tree.geoms] for m, b in bodies.items() if b},
         contacts={m: foot_contacts(f[..., 2]) for m, f in feet.items()},
         feet_xy={m: f[..., :2] for m, f in feet.items()},
-        edges=edge_indices(rec.joint_names), image_size=image_size)
+        edges=edge_indices(rec.joint_names), image_size=image_size,
+        restarting=_restarting(rec))
+
+
+def _restarting(rec: Reconstruction) -> np.ndarray:
+    """(T,) bool: frames from each physics restart (a jump back to the estimate) on, for
+    RESTART_SHOWN_S."""
+    shown = np.zeros(rec.num_frames, dtype=bool)
+    if rec.has_physics:
+        span = max(1, round(RESTART_SHOWN_S * rec.fps))
+        for f in rec.restarts:
+            shown[max(f, 0):f + span] = True
+    return shown
 
 
 def _draw_motions(scene: _Scene, image: np.ndarray, k: np.ndarray, t_w2c: np.ndarray, t: int,
@@ -152,6 +167,11 @@ def _legend(image: np.ndarray, scene: _Scene, t: int) -> None:
         cv2.rectangle(image, (12, y - 10), (26, y + 2), color, -1)
         cv2.putText(image, name, (32, y), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (30, 30, 30), 1,
                     cv2.LINE_AA)
+    if scene.restarting[t]:  # say why the physics body jumped
+        y = 36 + 20 * len(rows)
+        cv2.rectangle(image, (6, y), (300, y + 24), RESTART_COLOR, -1)
+        cv2.putText(image, "physics restarted from the estimate", (12, y + 16),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
 
 
 def compose_frame(scene: _Scene, frame: np.ndarray | None, t: int,
