@@ -71,4 +71,3 @@ class PhysicsResult:
 def mean_window_loss(windows: list[dict]) -> float:
     """The windows' final weighted losses, averaged (unweighted by length)."""
     return float(np.mean([w["loss_final"] for w in windows]))
-
