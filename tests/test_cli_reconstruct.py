@@ -11,7 +11,7 @@ import pytest
 
 from physpose.cli import SUBCOMMANDS, build_parser, main
 from physpose.cli.reconstruct import (camera_intrinsics, parse_formats, pipeline_config,
-                                      print_summary, restarts_line)
+                                      print_summary, restarts_line, undetected_line)
 from physpose.dynamics import PRESETS
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.errors import PhysposeError
@@ -173,6 +173,21 @@ def test_summary_says_where_the_physics_restarted_from_the_estimate(capsys):
     print_summary(recon.replace(joints_physics=None, landmarks_physics=None, qpos_physics=None),
                   Path("out"), {}, None, {})
     assert "restart" not in capsys.readouterr().out  # no physics, nothing to say
+
+
+def test_summary_says_where_no_person_was_detected(capsys):
+    recon = make_reconstruction(num_frames=30)
+    assert recon.undetected_runs == [] and undetected_line(recon) is None
+    kp = recon.keypoints2d.copy()
+    kp[0, :, 2] = 0          # one frame at the start
+    kp[10:20, :, 2] = 0      # a run in the middle
+    kp[12, 5, 2] = 0.9       # one landmark seen: the frame is observed
+    recon = recon.replace(keypoints2d=kp)
+    assert recon.undetected_runs == [(0, 0), (10, 11), (13, 19)]
+    print_summary(recon, Path("out"), {}, None, {})
+    out = capsys.readouterr().out
+    assert "no person detected in 10 of 30 frames, at 0 (0.00 s), 10-11 (0.40-0.48 s)," in out
+    assert "inferred from the frames around them" in out
 
 
 @pytest.mark.parametrize("command", [None, *SUBCOMMANDS])

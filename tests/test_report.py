@@ -105,3 +105,18 @@ def test_restarts_are_marked_on_the_gap_plot_and_in_the_summary(tmp_path):
     assert dict(summary_rows(calm, tmp_path))["physics restarts"].startswith("none")
     kinematic = rec.replace(joints_physics=None, landmarks_physics=None, qpos_physics=None)
     assert "physics restarts" not in dict(summary_rows(kinematic, tmp_path))
+
+
+@needs_bundle
+def test_frames_without_a_detection_are_marked_and_listed(tmp_path):
+    rec = make_reconstruction(num_frames=12)
+    kp = rec.keypoints2d.copy()
+    kp[3:7] = 0  # a gap too long to interpolate: every confidence 0
+    rec = rec.replace(keypoints2d=kp)
+    gap = next(p for p in report_data(rec)["plots"] if p["id"] == "gap")
+    band = next(b for b in gap["bands"] if b["name"] == "no person detected")
+    assert [i for i, on in enumerate(band["on"]) if on] == [3, 4, 5, 6]
+    row = dict(summary_rows(rec, tmp_path))["frames without a detection"]
+    assert row.startswith("4,") and "0.12-0.28 s" in row
+    assert "frames without a detection" not in dict(summary_rows(make_reconstruction(12),
+                                                                 tmp_path))

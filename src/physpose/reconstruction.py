@@ -29,6 +29,13 @@ def restart_frames(windows: list[dict]) -> list[int]:
             if isinstance(w, dict) and w.get("reset_after")]
 
 
+def frame_runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """(first, last) indices of each run of True in a (T,) bool array."""
+    edges = np.diff(np.concatenate([[0], np.asarray(flags, dtype=np.int8), [0]]))
+    return [(int(a), int(b) - 1) for a, b in zip(np.flatnonzero(edges == 1),
+                                                  np.flatnonzero(edges == -1))]
+
+
 @dataclass(frozen=True, eq=False)
 class Reconstruction:
     """World-frame motion (z up, ground z = 0, metres) at the analysis frame rate."""
@@ -82,6 +89,13 @@ class Reconstruction:
         if "restarts" in dynamics:
             return [int(f) for f in dynamics["restarts"]]
         return restart_frames(dynamics.get("windows") or [])
+
+    @property
+    def undetected_runs(self) -> list[tuple[int, int]]:
+        """(first, last) frames of each run without a detection (every keypoint's confidence
+        0): the motion there is inferred from the neighbouring frames, not observed. Short
+        gaps filled by interpolation at observe time carry confidences and are not listed."""
+        return frame_runs(self.keypoints2d[..., 2].max(axis=1) <= 0)
 
     def joints(self, which: str = "best") -> np.ndarray:
         """(T, J, 3) physics joints if present (or which='physics'), else kinematic."""

@@ -249,12 +249,27 @@ def restarts_line(recon: Reconstruction) -> str:
             "(docs/dynamics.md, Retries)")
 
 
+def undetected_line(recon: Reconstruction) -> str | None:
+    """One line on the frames without a detection (too long a gap to interpolate), if any."""
+    runs = recon.undetected_runs
+    if not runs:
+        return None
+    count = sum(b - a + 1 for a, b in runs)
+    where = ", ".join(f"{a}-{b} ({a / recon.fps:.2f}-{(b + 1) / recon.fps:.2f} s)" if b > a
+                      else f"{a} ({a / recon.fps:.2f} s)" for a, b in runs)
+    return (f"input: no person detected in {count} of {recon.num_frames} frames, at {where}; "
+            "the motion there is inferred from the frames around them, not observed")
+
+
 def print_summary(recon: Reconstruction, out: Path, written: dict[str, Path],
                   metrics: dict | None, timings: dict[str, float]) -> None:
     """The end-of-run summary: metrics table, files and time per stage."""
     motions = "physics and kinematic motion" if recon.has_physics else "kinematic motion only"
     print(f"\n{recon.num_frames} frames at {recon.fps:g} fps ({recon.num_frames / recon.fps:.2f}"
           f" s), {motions}")
+    undetected = undetected_line(recon)
+    if undetected:
+        print(undetected)
     if recon.has_physics:
         print(restarts_line(recon))
     if metrics:

@@ -87,11 +87,16 @@ def _plots(rec: Reconstruction, bodies: dict[str, BodyMotion | None]) -> list[di
         gap = np.linalg.norm(rec.joints_physics - rec.joints_kinematic, axis=-1).mean(axis=1)
         restarts = np.zeros(rec.num_frames, dtype=bool)
         restarts[[f for f in rec.restarts if 0 <= f < rec.num_frames]] = True
+        undetected = rec.keypoints2d[..., 2].max(axis=1) <= 0
+        bands = [{"name": "restart from the estimate (a jump)", "on": restarts.tolist(),
+                  "color": "#c0392b"}]
+        if undetected.any():
+            bands.append({"name": "no person detected", "on": undetected.tolist(),
+                          "color": "#7f8c8d"})
         plots.append({"id": "gap", "title": "Physics vs kinematic (mean joint distance)",
                       "xlabel": "time (s)", "ylabel": "cm", "x": time, "cursor": True,
                       "series": [{"name": "distance", "y": _r(100 * gap), "color": "#444"}],
-                      "bands": [{"name": "restart from the estimate (a jump)",
-                                 "on": restarts.tolist(), "color": "#c0392b"}]})
+                      "bands": bands})
     losses = window_losses(rec.meta, rec.fps)
     if losses is not None:
         plots.append(losses)
@@ -156,6 +161,12 @@ def summary_rows(rec: Reconstruction, folder: Path) -> list[tuple[str, str]]:
     source = rec.meta.get("source")
     if source:
         rows.insert(1, ("video", str(source)))
+    runs = rec.undetected_runs
+    if runs:
+        rows.append(("frames without a detection",
+                     f"{sum(b - a + 1 for a, b in runs)}, inferred, not observed: "
+                     + ", ".join(f"{a / rec.fps:.2f}-{(b + 1) / rec.fps:.2f} s"
+                                 for a, b in runs)))
     if rec.has_physics:
         frames = rec.restarts
         rows.append(("physics restarts", "none: one continuous simulation" if not frames else
