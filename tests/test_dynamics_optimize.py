@@ -154,6 +154,28 @@ def test_a_last_window_that_strays_is_cut_and_restarted(clip):
     assert len(res.ctrl) == len(run(clip, TINY, checkpoints=False).ctrl)
 
 
+def test_stretches_between_restarts_are_placed_on_the_estimate(clip, tmp_path):
+    body, fit, obs = clip
+    jumped = fit.qpos.copy()
+    jumped[5:, 0] += 0.6
+    moved_fit = dataclasses.replace(fit, qpos=jumped)
+    cfg = dataclasses.replace(TINY, retries=0)
+    placed = optimize_dynamics(body, moved_fit, obs, cfg, checkpoint_dir=tmp_path,
+                               progress=False)
+    bounds = [0, *placed.restarts, placed.num_frames]
+    assert placed.restarts and placed.stretch_shifts.shape == (len(bounds) - 1, 2)
+    # Placing happens after the windows: the same checkpoints serve both settings.
+    raw = optimize_dynamics(body, moved_fit, obs,
+                            dataclasses.replace(cfg, place_stretches=False),
+                            checkpoint_dir=tmp_path, progress=False)
+    assert len(list(tmp_path.iterdir())) == 1 and raw.stretch_shifts.shape == (0, 2)
+    np.testing.assert_array_equal(raw.ctrl, placed.ctrl)
+    for (a, b), d in zip(zip(bounds[:-1], bounds[1:]), placed.stretch_shifts):
+        np.testing.assert_allclose(placed.qpos[a:b, :2] - raw.qpos[a:b, :2], np.tile(d, (b - a, 1)))
+        np.testing.assert_allclose(placed.joints[a:b], raw.joints[a:b] + [*d, 0.0])
+        np.testing.assert_array_equal(placed.qpos[a:b, 2:], raw.qpos[a:b, 2:])
+
+
 @pytest.mark.parametrize("independent", [False, True])
 def test_interrupted_run_resumes_to_the_uninterrupted_result(clip, tmp_path, monkeypatch,
                                                              independent):

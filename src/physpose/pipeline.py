@@ -111,6 +111,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                                             "timings": phys.timings,
                                             "candidates": phys.candidates,
                                             "restarts": phys.restarts,
+                                            "stretch_shifts": phys.stretch_shifts.tolist(),
                                             "reference": phys.reference_summary()},
                 physpose_version=__version__)
     recon = recon.replace(meta=meta)

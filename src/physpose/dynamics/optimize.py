@@ -41,11 +41,13 @@ from physpose.dynamics.result import PhysicsResult, mean_window_loss
 from physpose.dynamics.rollout import SimModel, Simulator, Trajectories, make_state, sim_model
 from physpose.dynamics.spline import KnotGrid
 from physpose.dynamics.stance import flatten_stance_feet
+from physpose.dynamics.stretches import shift_stretches, stretch_shifts, translation_invariant
 from physpose.dynamics.balance import BalanceGains, balance_plan
 from physpose.dynamics.controller import ControllerGains, track_reference
 from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
                                        ranked_fitness, score, step_position, window_over)
 from physpose.errors import PhysposeError
+from physpose.reconstruction import restart_frames
 from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
 from physpose.skeleton import DOF_NAMES, NQ
@@ -89,6 +91,9 @@ class DynamicsConfig:
     optimisations with seeds seed, seed + 1, ...; the one with the lowest mean window loss is
     kept (open-loop balance is chaotic: the same clip drifts under one seed and not under
     another, and a lower loss goes with a lower error; docs/dynamics.md). seed: CMA-ES seed.
+    place_stretches: move each continuous simulated stretch (between restarts) horizontally so
+        that its COM matches the estimate's on average (sequential runs on a floor without
+        obstacles, where the moved stretch is the same simulation; stretches.py).
     nthread: rollout threads (does not change results).
     """
 
@@ -120,6 +125,7 @@ class DynamicsConfig:
     reset_distance: float = 0.15
     search: str = "legs_trunk"
     candidates: int = 1
+    place_stretches: bool = True
     seed: int = 0
     nthread: int = 2
 
@@ -650,7 +656,9 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
             folder = None
             if checkpoints:
                 # The key is a single run's: candidates only says how many seeds to try.
-                identity = {k: v for k, v in single.identity().items() if k != "candidates"}
+                # Placing the stretches happens after the windows: their checkpoints stay valid.
+                identity = {k: v for k, v in single.identity().items()
+                            if k not in ("candidates", "place_stretches")}
                 key = checkpoint.run_key(identity, inputs)
                 folder = checkpoint.run_folder(key, checkpoint_dir)
             outputs, ctrl, records = run(setup, simulator, single, folder, progress, timing)
@@ -665,6 +673,11 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
     records = [dict(r, reference_residual=float(np.median(residual[r["steps"][0]:
                                                                     r["steps"][1] + 1])))
                for r in records]
+    restarts = restart_frames(records)
+    shifts = np.zeros((0, 2))
+    if config.place_stretches and not config.independent and translation_invariant(body.scene):
+        shifts = stretch_shifts(outputs["com"], setup.objective.com, restarts)
+        outputs = shift_stretches(outputs, restarts, shifts)
     timing["total"] = time.perf_counter() - t0
     timing["search"] = sum(r["seconds"] for _, _, recs in runs for r in recs)
     candidates = [dict(row, kept=j == k) for j, row in enumerate(table)] \
@@ -674,4 +687,4 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
         landmarks=outputs["landmarks"], com=outputs["com"],
         foot_heights=foot_heights(sim.model, outputs["qpos"], body.foot_geom_ids), ctrl=ctrl,
         windows=records, timings=timing, config=config.identity(), candidates=candidates,
-        reference_residual=residual[setup.frame_steps])
+        reference_residual=residual[setup.frame_steps], stretch_shifts=shifts)

@@ -26,6 +26,8 @@ class PhysicsResult:
     of the smoothed estimate; 0 for a motion the body can make). Where it is large the
     simulated body cannot follow the estimate (docs/dynamics.md, "Consistency of the estimate").
     `restarts`: the frames at which the motion restarts from the kinematic estimate.
+    stretch_shifts (S, 2): the horizontal shift (m) given to each continuous stretch, split at
+    the restarts (DynamicsConfig.place_stretches; empty when not placed).
     """
 
     fps: float
@@ -40,6 +42,7 @@ class PhysicsResult:
     config: dict = dataclasses.field(default_factory=dict)
     candidates: list[dict] = dataclasses.field(default_factory=list)
     reference_residual: np.ndarray | None = None
+    stretch_shifts: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def num_frames(self) -> int:
