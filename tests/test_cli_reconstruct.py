@@ -103,6 +103,9 @@ def test_flags_make_the_pipeline_config():
     assert pipeline_config(_args("v.mp4", "--out", "o", "--candidates", "3")
                            ).dynamics.candidates == 3
     assert not default.dynamics.balance.enabled
+    assert default.dynamics.place_stretches
+    assert not pipeline_config(_args("v.mp4", "--out", "o", "--no-place-stretches")
+                               ).dynamics.place_stretches
     assert pipeline_config(_args("v.mp4", "--out", "o", "--balance-hz", "0.5")
                            ).dynamics.balance.frequency == 0.5
     assert default.dynamics.weights == PRESETS["fast"].weights

@@ -59,6 +59,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "ankles) in every simulated sample, Hz, e.g. 0.5; 0 (the default) is "
                         "off. Measured to help on standing and slow motions, to make walking "
                         "feet slide (docs/dynamics.md)")
+    p.add_argument("--place-stretches", action=argparse.BooleanOptionalAction, default=None,
+                   help="move each continuous simulated stretch (between restarts) "
+                        "horizontally to where the estimate is on average (default on; on a "
+                        "floor without obstacles this is the same simulation, moved); "
+                        "--no-place-stretches keeps every stretch where the estimate put its "
+                        "first frame")
     p.add_argument("--weight", action="append", default=[], metavar="TERM=W",
                    help="weight of one objective term, repeatable; terms: "
                         f"{', '.join(TERMS)}. The paper's weights are com=15 pose=0.5 "
@@ -158,6 +164,8 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     if args.weight:
         dynamics = dataclasses.replace(dynamics, weights=parse_weights(args.weight,
                                                                        dynamics.weights))
+    if args.place_stretches is not None:
+        dynamics = dataclasses.replace(dynamics, place_stretches=args.place_stretches)
     if args.balance_hz is not None:
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))
