@@ -91,11 +91,16 @@ class Reconstruction:
         return restart_frames(dynamics.get("windows") or [])
 
     @property
+    def undetected(self) -> np.ndarray:
+        """(T,) bool: frames without a detection (every keypoint's confidence 0); the motion
+        there is inferred from the neighbouring frames, not observed. Short gaps filled by
+        interpolation at observe time carry confidences and are not flagged."""
+        return self.keypoints2d[..., 2].max(axis=1) <= 0
+
+    @property
     def undetected_runs(self) -> list[tuple[int, int]]:
-        """(first, last) frames of each run without a detection (every keypoint's confidence
-        0): the motion there is inferred from the neighbouring frames, not observed. Short
-        gaps filled by interpolation at observe time carry confidences and are not listed."""
-        return frame_runs(self.keypoints2d[..., 2].max(axis=1) <= 0)
+        """(first, last) frames of each run of `undetected` frames."""
+        return frame_runs(self.undetected)
 
     def joints(self, which: str = "best") -> np.ndarray:
         """(T, J, 3) physics joints if present (or which='physics'), else kinematic."""

@@ -87,7 +87,7 @@ def _plots(rec: Reconstruction, bodies: dict[str, BodyMotion | None]) -> list[di
         gap = np.linalg.norm(rec.joints_physics - rec.joints_kinematic, axis=-1).mean(axis=1)
         restarts = np.zeros(rec.num_frames, dtype=bool)
         restarts[[f for f in rec.restarts if 0 <= f < rec.num_frames]] = True
-        undetected = rec.keypoints2d[..., 2].max(axis=1) <= 0
+        undetected = rec.undetected
         bands = [{"name": "restart from the estimate (a jump)", "on": restarts.tolist(),
                   "color": "#c0392b"}]
         if undetected.any():
