@@ -107,12 +107,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     recon = kin.to_reconstruction(obs, body_mjcf=body.xml).replace(
         joints_physics=phys.joints, qpos_physics=phys.qpos, landmarks_physics=phys.landmarks)
     meta = dict(recon.meta)
-    meta.update(timings_s=timings, dynamics={"windows": phys.windows, "losses": phys.losses(),
-                                            "timings": phys.timings,
-                                            "candidates": phys.candidates,
-                                            "restarts": phys.restarts,
-                                            "stretch_shifts": phys.stretch_shifts.tolist(),
-                                            "reference": phys.reference_summary()},
+    meta.update(timings_s=timings, dynamics={**phys.meta(), "timings": phys.timings},
                 physpose_version=__version__)
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)

@@ -62,6 +62,12 @@ class PhysicsResult:
         out["total"] = mean_window_loss(self.windows)
         return out
 
+    def meta(self) -> dict:
+        """JSON-able record of the run for a reconstruction's meta["dynamics"]."""
+        return {"windows": self.windows, "losses": self.losses(), "candidates": self.candidates,
+                "restarts": self.restarts, "stretch_shifts": self.stretch_shifts.tolist(),
+                "reference": self.reference_summary()}
+
     def reference_summary(self) -> dict[str, float]:
         """Median and 90th percentile over frames of ``reference_residual`` (body weights)."""
         if self.reference_residual is None or not len(self.reference_residual):

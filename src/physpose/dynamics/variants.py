@@ -36,10 +36,7 @@ def run_dynamics_variant(obs: Observations, context: VariantContext, kinematic_v
     recon = kin.to_reconstruction(obs, body_mjcf=body.xml)
     meta = dict(recon.meta)
     meta.update(variant=name, timings_s={"kinematics": kin_s, "dynamics": phys.timings["total"]},
-                dynamics={"losses": phys.losses(), "windows": phys.windows,
-                          "candidates": phys.candidates, "restarts": phys.restarts,
-                          "stretch_shifts": phys.stretch_shifts.tolist(),
-                          "reference": phys.reference_summary()})
+                dynamics=phys.meta())
     return recon.replace(joints_physics=phys.joints, qpos_physics=phys.qpos,
                          landmarks_physics=phys.landmarks, meta=meta)
 
