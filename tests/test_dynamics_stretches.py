@@ -5,7 +5,6 @@ simulation on a floor without obstacles."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from physpose.body import build_body, standing_qpos
 from physpose.dynamics.rollout import Simulator, make_state, sim_model

@@ -5,8 +5,8 @@ Public API: `optimize_dynamics`, `DynamicsConfig`, `PRESETS`, `ABLATIONS`, `abla
 """
 
 from physpose.dynamics.objective import TERMS, ObjectiveWeights
-from physpose.dynamics.optimize import (ABLATIONS, PRESETS, DynamicsConfig, ablated,
-                                        optimize_dynamics)
+from physpose.dynamics.config import ABLATIONS, PRESETS, DynamicsConfig, ablated
+from physpose.dynamics.optimize import optimize_dynamics
 from physpose.dynamics.result import PhysicsResult
 
 __all__ = ["optimize_dynamics", "DynamicsConfig", "PRESETS", "ABLATIONS", "ablated",

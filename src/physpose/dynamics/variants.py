@@ -16,7 +16,8 @@ import time
 from physpose.benchmark.variants import VariantContext, register_variant
 from physpose.body import build_body
 from physpose.dynamics.objective import ObjectiveWeights
-from physpose.dynamics.optimize import ABLATIONS, PRESETS, DynamicsConfig, ablated, optimize_dynamics
+from physpose.dynamics.config import ABLATIONS, PRESETS, DynamicsConfig, ablated
+from physpose.dynamics.optimize import optimize_dynamics
 from physpose.kinematics.config import KinematicConfig
 from physpose.observations import Observations
 from physpose.reconstruction import Reconstruction
