@@ -70,7 +70,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         f"{', '.join(TERMS)}. The paper's weights are com=15 pose=0.5 "
                         "reprojection=4 prior=1 tv=1 lim=1; the fast preset sets com=0. E.g. "
                         "--weight pose=8: closer to the estimate's pose, feet slide more "
-                        "(measured trade-off in docs/dynamics.md)")
+                        "(measured trade-off in docs/dynamics_history.md, stop 16)")
     g = p.add_argument_group("the person and the video")
     g.add_argument("--height", type=float, metavar="M", help="the person's standing height, m")
     g.add_argument("--mass", type=float, metavar="KG", help="the person's mass, kg")
