@@ -1,5 +1,5 @@
-"""The windowed optimiser on a tiny simulated clip: determinism, checkpoint/resume, both modes,
-ablation configs and input checks."""
+"""The windowed optimiser on a tiny simulated clip: determinism, checkpoint/resume, both modes
+and input checks."""
 
 from __future__ import annotations
 
@@ -9,13 +9,11 @@ import numpy as np
 import pytest
 
 from physpose.body import build_body
-from physpose.dynamics import ABLATIONS, PRESETS, DynamicsConfig, ablated, optimize_dynamics
+from physpose.dynamics import DynamicsConfig, optimize_dynamics
 from physpose.dynamics import checkpoint
 from physpose.dynamics.balance import BalanceGains
-from physpose.dynamics.objective import ObjectiveWeights
 from physpose.dynamics.optimize import _cma, _window_seed
 from physpose.dynamics.synthetic import simulated_clip
-from physpose.dynamics.variants import FULL_OBJECTIVE
 from physpose.dynamics.windows import blend_weights, plan_windows
 from physpose.errors import PhysposeError
 from physpose.shape import BodyShape
@@ -211,29 +209,6 @@ def test_independent_windows_are_blended(clip):
     weights = blend_weights(wins, 41)
     np.testing.assert_allclose(weights.sum(axis=0), 1.0)
     assert wins[-1].last == 40 and wins[-1].last - wins[-1].first == 10
-
-
-def test_presets_and_ablations():
-    assert PRESETS["paper"].popsize == 100 and PRESETS["paper"].iterations == 2000
-    assert PRESETS["paper"].window == 1.0
-    # The paper preset keeps the paper's weights; the fast one drops the COM term.
-    assert PRESETS["paper"].weights.as_dict() == ObjectiveWeights().as_dict()
-    assert PRESETS["fast"].weights.com == 0.0 and PRESETS["fast"].weights.pose == 0.5
-    assert FULL_OBJECTIVE == dataclasses.replace(PRESETS["fast"], weights=ObjectiveWeights())
-    for name, terms in ABLATIONS.items():
-        w = ablated(FULL_OBJECTIVE, name).weights
-        for term in terms:
-            assert getattr(w, term) == 0.0
-        assert sum(getattr(w, t) > 0 for t in ("com", "pose", "reprojection", "prior")) \
-            == 4 - len(terms)
-    with pytest.raises(PhysposeError):
-        ablated(PRESETS["fast"], "nothing")
-    with pytest.raises(PhysposeError):
-        DynamicsConfig(overlap=2.0)
-    with pytest.raises(PhysposeError):
-        DynamicsConfig(search="arms")
-    with pytest.raises(PhysposeError):
-        DynamicsConfig(candidates=0)
 
 
 def test_mismatched_inputs_are_refused(clip):

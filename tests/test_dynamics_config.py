@@ -1,0 +1,35 @@
+"""The dynamics configuration: presets, ablations and refused settings."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+
+from physpose.dynamics import ABLATIONS, PRESETS, DynamicsConfig, ablated
+from physpose.dynamics.objective import ObjectiveWeights
+from physpose.dynamics.variants import FULL_OBJECTIVE
+from physpose.errors import PhysposeError
+
+
+def test_presets_and_ablations():
+    assert PRESETS["paper"].popsize == 100 and PRESETS["paper"].iterations == 2000
+    assert PRESETS["paper"].window == 1.0
+    # The paper preset keeps the paper's weights; the fast one drops the COM term.
+    assert PRESETS["paper"].weights.as_dict() == ObjectiveWeights().as_dict()
+    assert PRESETS["fast"].weights.com == 0.0 and PRESETS["fast"].weights.pose == 0.5
+    assert FULL_OBJECTIVE == dataclasses.replace(PRESETS["fast"], weights=ObjectiveWeights())
+    for name, terms in ABLATIONS.items():
+        w = ablated(FULL_OBJECTIVE, name).weights
+        for term in terms:
+            assert getattr(w, term) == 0.0
+        assert sum(getattr(w, t) > 0 for t in ("com", "pose", "reprojection", "prior")) \
+            == 4 - len(terms)
+    with pytest.raises(PhysposeError):
+        ablated(PRESETS["fast"], "nothing")
+    with pytest.raises(PhysposeError):
+        DynamicsConfig(overlap=2.0)
+    with pytest.raises(PhysposeError):
+        DynamicsConfig(search="arms")
+    with pytest.raises(PhysposeError):
+        DynamicsConfig(candidates=0)
