@@ -33,3 +33,11 @@ def test_presets_and_ablations():
         DynamicsConfig(search="arms")
     with pytest.raises(PhysposeError):
         DynamicsConfig(candidates=0)
+
+
+def test_window_identity_leaves_out_what_does_not_change_the_windows():
+    base = PRESETS["fast"]
+    same = dataclasses.replace(base, candidates=3, place_stretches=False, nthread=1)
+    assert same.window_identity() == base.window_identity()
+    assert dataclasses.replace(base, seed=1).window_identity() != base.window_identity()
+    assert "place_stretches" in base.identity()  # still recorded with the result

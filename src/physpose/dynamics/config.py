@@ -123,6 +123,15 @@ class DynamicsConfig:
             out.pop("balance")  # switched off: the same runs (and checkpoints) as before it
         return out
 
+    def window_identity(self) -> dict:
+        """The fields that change one seed's optimised windows: the checkpoint key's config.
+        `candidates` only says how many seeds to try, and the stretches are placed after the
+        windows, so neither is in it."""
+        out = self.identity()
+        for name in ("candidates", "place_stretches"):
+            out.pop(name)
+        return out
+
 
 PRESETS: dict[str, DynamicsConfig] = {
     # Tracking start on: on 4 motion-capture clips it cut MPJPE-G on three. One candidate: two

@@ -520,11 +520,7 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
                            f"(seed {single.seed})", file=sys.stderr)
             folder = None
             if checkpoints:
-                # The key is a single run's: candidates only says how many seeds to try.
-                # Placing the stretches happens after the windows: their checkpoints stay valid.
-                identity = {k: v for k, v in single.identity().items()
-                            if k not in ("candidates", "place_stretches")}
-                key = checkpoint.run_key(identity, inputs)
+                key = checkpoint.run_key(single.window_identity(), inputs)
                 folder = checkpoint.run_folder(key, checkpoint_dir)
             outputs, ctrl, records = run(setup, simulator, single, folder, progress, timing)
             runs.append((outputs, ctrl, records))
