@@ -262,7 +262,7 @@ def undetected_line(recon: Reconstruction) -> str | None:
     runs = recon.undetected_runs
     if not runs:
         return None
-    count = sum(b - a + 1 for a, b in runs)
+    count = int(recon.undetected.sum())
     where = ", ".join(f"{a}-{b} ({a / recon.fps:.2f}-{(b + 1) / recon.fps:.2f} s)" if b > a
                       else f"{a} ({a / recon.fps:.2f} s)" for a, b in runs)
     return (f"input: no person detected in {count} of {recon.num_frames} frames, at {where}; "

@@ -164,7 +164,7 @@ def summary_rows(rec: Reconstruction, folder: Path) -> list[tuple[str, str]]:
     runs = rec.undetected_runs
     if runs:
         rows.append(("frames without a detection",
-                     f"{sum(b - a + 1 for a, b in runs)}, inferred, not observed: "
+                     f"{int(rec.undetected.sum())}, inferred, not observed: "
                      + ", ".join(f"{a / rec.fps:.2f}-{(b + 1) / rec.fps:.2f} s"
                                  for a, b in runs)))
     if rec.has_physics:
