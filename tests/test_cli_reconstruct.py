@@ -110,7 +110,8 @@ def test_flags_make_the_pipeline_config():
                            ).dynamics.balance.frequency == 0.5
     assert default.dynamics.weights == PRESETS["fast"].weights
     paper = pipeline_config(_args("v.mp4", "--out", "o", "--weight", "com=15",
-                                  "--weight", "POSE = 0.5")).dynamics.weights
+                                  "--weight", "POSE = 0.5", "--weight", "swing=0")
+                            ).dynamics.weights
     assert paper == ObjectiveWeights()  # the paper's weights
     no_tv = pipeline_config(_args("v.mp4", "--out", "o", "--weight", "tv=0")).dynamics.weights
     assert no_tv == dataclasses.replace(PRESETS["fast"].weights, tv=0.0)

@@ -15,9 +15,12 @@ from physpose.errors import PhysposeError
 def test_presets_and_ablations():
     assert PRESETS["paper"].popsize == 100 and PRESETS["paper"].iterations == 2000
     assert PRESETS["paper"].window == 1.0
-    # The paper preset keeps the paper's weights; the fast one drops the COM term.
+    # The paper preset keeps the paper's weights (no swing term); the fast one drops the COM
+    # term and adds the swing term.
     assert PRESETS["paper"].weights.as_dict() == ObjectiveWeights().as_dict()
+    assert ObjectiveWeights().swing == 0.0
     assert PRESETS["fast"].weights.com == 0.0 and PRESETS["fast"].weights.pose == 0.5
+    assert PRESETS["fast"].weights.swing > 0
     assert FULL_OBJECTIVE == dataclasses.replace(PRESETS["fast"], weights=ObjectiveWeights())
     for name, terms in ABLATIONS.items():
         w = ablated(FULL_OBJECTIVE, name).weights
@@ -41,3 +44,11 @@ def test_window_identity_leaves_out_what_does_not_change_the_windows():
     assert same.window_identity() == base.window_identity()
     assert dataclasses.replace(base, seed=1).window_identity() != base.window_identity()
     assert "place_stretches" in base.identity()  # still recorded with the result
+
+
+def test_a_zero_swing_weight_keeps_the_keys_from_before_the_term():
+    """Runs without the swing term keep their checkpoints: the weight is left out at 0."""
+    assert "swing" not in FULL_OBJECTIVE.identity()["weights"]
+    assert set(FULL_OBJECTIVE.identity()["weights"]) == {"com", "pose", "reprojection", "prior",
+                                                          "tv", "lim"}
+    assert PRESETS["fast"].identity()["weights"]["swing"] == PRESETS["fast"].weights.swing

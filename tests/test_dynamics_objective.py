@@ -103,6 +103,45 @@ def test_limit_term_zero_inside_and_exponential_outside(scene):
     assert values[0] > 0 and values[1] > 2 * values[0]
 
 
+@pytest.fixture(scope="module")
+def stepping(scene):
+    """The standing body with its left foot lifted (hip and knee flexion) in the last 6 frames."""
+    body, qpos, _ = scene
+    step = np.tile(standing_qpos(body), (FRAMES, 1))
+    lift = np.r_[np.zeros(4), np.linspace(0.7, 1.0, FRAMES - 4)]
+    step[:, 7 + DOF_NAMES.index("l_hip_y")] -= lift
+    step[:, 7 + DOF_NAMES.index("l_knee_y")] += 1.5 * lift
+    K, T = virtual_camera()
+    uv = project(fk_mujoco(body, step)[1], K, T)
+    keypoints = np.concatenate([uv, np.full(uv.shape[:-1] + (1,), 0.9)], axis=-1)
+    return body, step, make_reference(body.model, step, keypoints, K, T, FPS)
+
+
+def test_swing_mask_marks_the_lifted_foot_only(stepping):
+    _, _, ref = stepping
+    assert not ref.swing[:4].any() and not ref.swing[:, 1].any()  # standing, and the right foot
+    assert ref.swing[4:, 0].all()
+
+
+def test_swing_term_follows_the_lifted_foot_but_not_the_root_or_standing_feet(stepping):
+    body, step, ref = stepping
+    frames = np.arange(FRAMES)
+    exact = evaluate_terms(samples_of(body, step), ref, frames)["swing"][0]
+    assert exact == pytest.approx(0.0, abs=1e-9)
+    shifted = step.copy()
+    shifted[:, :2] += [0.2, -0.1]  # the whole body elsewhere on the floor: the same steps
+    right_knee = step.copy()
+    right_knee[:, 7 + DOF_NAMES.index("r_knee_y")] += 0.3  # the standing foot moves
+    for same in (shifted, right_knee):
+        assert evaluate_terms(samples_of(body, same), ref, frames)["swing"][0] == pytest.approx(
+            0.0, abs=1e-9)
+    lowered = step.copy()
+    lowered[:, 2] -= 0.05  # the swing foot 5 cm lower in every swing frame
+    swing_frames = ref.swing[1:, 0].sum()
+    assert evaluate_terms(samples_of(body, lowered), ref, frames)["swing"][0] == pytest.approx(
+        0.05 * swing_frames / (FRAMES - 1), rel=1e-6)
+
+
 def test_weights_skip_terms_and_total_is_the_weighted_sum(scene):
     body, qpos, ref = scene
     moved = qpos.copy()

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from physpose.body import build_body
-from physpose.dynamics import DynamicsConfig, optimize_dynamics
+from physpose.dynamics import TERMS, DynamicsConfig, optimize_dynamics
 from physpose.dynamics import checkpoint
 from physpose.dynamics.balance import BalanceGains
 from physpose.dynamics.optimize import _cma, _window_seed
@@ -49,7 +49,7 @@ def test_result_shapes_and_records(clip):
     for w in res.windows:
         assert w["evaluations"] == 1 + TINY.iterations * (TINY.popsize + 1)
         assert w["loss_final"] <= w["loss_initial"]
-        assert set(w["terms_final"]) == {"com", "pose", "reprojection", "prior", "tv", "lim"}
+        assert set(w["terms_final"]) == set(TERMS)
     # The estimate's unexplained root force, per frame and per window (median over its steps).
     assert res.reference_residual.shape == (t,) and (res.reference_residual >= 0).all()
     assert all(0 <= w["reference_residual"] < 1 for w in res.windows)

@@ -68,7 +68,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--weight", action="append", default=[], metavar="TERM=W",
                    help="weight of one objective term, repeatable; terms: "
                         f"{', '.join(TERMS)}. The paper's weights are com=15 pose=0.5 "
-                        "reprojection=4 prior=1 tv=1 lim=1; the fast preset sets com=0. E.g. "
+                        "reprojection=4 prior=1 tv=1 lim=1 (no swing term); the fast preset sets "
+                        "com=0 swing=12. E.g. "
                         "--weight pose=8: closer to the estimate's pose, feet slide more "
                         "(measured trade-off in docs/dynamics_history.md, stop 16)")
     g = p.add_argument_group("the person and the video")

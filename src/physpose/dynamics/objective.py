@@ -26,6 +26,14 @@ over frames; with one window length that is the same up to a constant factor). U
   (m/s^2) by second differences over frames, x TV_SCALE.
 - ``lim``: sum over hinges of exp(excess / LIMIT_SOFTNESS) - 1, where excess (rad) is how far
   an angle lies outside its joint range (0 inside).
+- ``swing`` (physpose's addition, not in the paper: weight 0 in its defaults): for each foot
+  the reference lifts into swing (its heel and toe landmarks both more than SWING_HEIGHT above
+  their heights in the standing pose), the mean distance (m) of the simulated ankle, heel and
+  toe landmarks to the reference's; the horizontal part relative to the root, so the term
+  shapes the step and not where the body is, the vertical part absolute, so the foot lifts and
+  lands when the estimate's does. Summed over the feet, averaged over frames. Standing feet
+  are left to the simulation: the estimate's standing feet slide, and following them would
+  slide the simulated ones (docs/dynamics.md, Swing feet).
 
 A sample whose simulation broke, whose root strays more than ``max_root_distance`` from the
 kinematic root, or that sinks a landmark more than ``max_penetration`` below the floor scores
@@ -41,15 +49,21 @@ import numpy as np
 
 from physpose.dynamics import quat
 from physpose.dynamics.rollout import FrameSamples
+from physpose.joints import LANDMARK_NAMES
 from physpose.metrics import transform_points
 from physpose.skeleton import DOF_LIMITS, NUM_JOINTS3
 
-TERMS: tuple[str, ...] = ("com", "pose", "reprojection", "prior", "tv", "lim")
+TERMS: tuple[str, ...] = ("com", "pose", "reprojection", "prior", "tv", "lim", "swing")
 TV_SCALE = 0.1             # the TV term's unit: 10 m/s^2 of acceleration change per frame -> 1
 LIMIT_SOFTNESS = 0.05      # rad: the limit penalty grows e-fold per this much excess
 _PRIOR_MEAN = np.clip(0.0, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])   # (48,) rad
 _PRIOR_STD = (DOF_LIMITS[:, 1] - DOF_LIMITS[:, 0]) / 4.0         # (48,) rad
 _MIN_DEPTH = 0.1           # m: landmarks closer to the camera than this are projected at it
+SWING_HEIGHT = 0.04        # m above standing: a reference foot this high is in swing
+# Landmark indices of each foot (left, right): ankle, heel, toe.
+FOOT_LANDMARKS = tuple(tuple(LANDMARK_NAMES.index(f"{side}_{part}")
+                             for part in ("ankle", "heel", "foot_index"))
+                       for side in ("left", "right"))
 
 
 @dataclass(frozen=True)
@@ -62,6 +76,7 @@ class ObjectiveWeights:
     prior: float = 1.0
     tv: float = 1.0
     lim: float = 1.0
+    swing: float = 0.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -80,6 +95,8 @@ class ObjectiveReference:
     qpos (T, 55) kinematic estimate; quats (T, 17, 4) its root and joint rotations (w,x,y,z);
     com (T, 3) m; com_velocity (T-1, 3) m/s between consecutive frames; keypoints2d (T, 33, 3) px + confidence; camera_K (3, 3);
     T_world2cam (4, 4); metres_per_px (T,) at the kinematic root's depth; fps Hz.
+    feet (T, 2, 3, 3) m: each foot's ankle, heel and toe landmarks (FOOT_LANDMARKS), x and y
+    relative to the root; swing (T, 2) bool: the foot is in swing (the ``swing`` term).
     """
 
     qpos: np.ndarray
@@ -91,6 +108,8 @@ class ObjectiveReference:
     T_world2cam: np.ndarray
     metres_per_px: np.ndarray
     fps: float
+    feet: np.ndarray
+    swing: np.ndarray
 
 
 def joint_quaternions(qpos: np.ndarray) -> np.ndarray:
@@ -101,6 +120,37 @@ def joint_quaternions(qpos: np.ndarray) -> np.ndarray:
                            quat.about_axis(ang[..., 2], 2))
     root = qpos[..., 3:7] / np.linalg.norm(qpos[..., 3:7], axis=-1, keepdims=True)
     return np.concatenate([root[..., None, :], joints], axis=-2)
+
+
+def landmark_sites(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
+    """World positions (T, 33, 3) m of the landmark sites for qpos (T, 55)."""
+    ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name) for name in LANDMARK_NAMES]
+    data = mujoco.MjData(model)
+    out = np.empty((len(qpos), len(ids), 3))
+    for t, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        out[t] = data.site_xpos[ids]
+    return out
+
+
+def root_relative_feet(landmarks: np.ndarray, qpos: np.ndarray) -> np.ndarray:
+    """Feet (..., 2, 3, 3) from landmarks (..., 33, 3): x and y relative to the root qpos[:2]."""
+    feet = np.stack([landmarks[..., list(foot), :] for foot in FOOT_LANDMARKS], axis=-3)
+    feet[..., :2] -= qpos[..., None, None, :2]
+    return feet
+
+
+def swing_mask(model: mujoco.MjModel, landmarks: np.ndarray) -> np.ndarray:
+    """(T, 2) bool: each foot's heel and toe (landmarks (T, 33, 3)) are both more than
+    SWING_HEIGHT above their heights in the model's standing pose (keyframe "standing")."""
+    key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "standing")
+    if key < 0:
+        raise ValueError("the body model has no 'standing' keyframe (build it with build_body)")
+    standing = model.key_qpos[key]
+    rest = landmark_sites(model, standing[None])[0, :, 2]
+    lifted = landmarks[..., 2] - rest > SWING_HEIGHT  # (T, 33)
+    return np.stack([lifted[:, heel] & lifted[:, toe] for _, heel, toe in FOOT_LANDMARKS], axis=-1)
 
 
 def centre_of_mass(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
@@ -126,12 +176,14 @@ def make_reference(model: mujoco.MjModel, qpos: np.ndarray, keypoints2d: np.ndar
     smooth_com = centre_of_mass(model, qpos if smooth_qpos is None else smooth_qpos)
     depth = transform_points(T_world2cam, qpos[:, :3])[:, 2]
     focal = 0.5 * (camera_K[0, 0] + camera_K[1, 1])
+    landmarks = landmark_sites(model, qpos)
     return ObjectiveReference(
         qpos=np.asarray(qpos, dtype=float), quats=joint_quaternions(qpos),
         com=centre_of_mass(model, qpos), com_velocity=np.diff(smooth_com, axis=0) * fps,
         keypoints2d=np.asarray(keypoints2d, dtype=float),
         camera_K=np.asarray(camera_K, dtype=float), T_world2cam=np.asarray(T_world2cam, dtype=float),
-        metres_per_px=np.maximum(depth, _MIN_DEPTH) / focal, fps=float(fps))
+        metres_per_px=np.maximum(depth, _MIN_DEPTH) / focal, fps=float(fps),
+        feet=root_relative_feet(landmarks, qpos), swing=swing_mask(model, landmarks))
 
 
 def _cost_com(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history) -> np.ndarray:
@@ -186,6 +238,13 @@ def _cost_lim(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, hist
     angles = s.qpos[:, 1:, 7:]
     excess = np.maximum(angles - DOF_LIMITS[:, 1], 0.0) + np.maximum(DOF_LIMITS[:, 0] - angles, 0.0)
     return np.expm1(excess / LIMIT_SOFTNESS).sum(axis=-1).mean(axis=1)
+
+
+def _cost_swing(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history
+                ) -> np.ndarray:
+    feet = root_relative_feet(s.landmarks[:, 1:], s.qpos[:, 1:])  # (B, F-1, 2, 3, 3)
+    dist = np.linalg.norm(feet - ref.feet[frames[1:]], axis=-1).mean(axis=-1)  # (B, F-1, 2)
+    return (dist * ref.swing[frames[1:]]).sum(axis=-1).mean(axis=1)
 
 
 _COSTS = {name: globals()[f"_cost_{name}"] for name in TERMS}

@@ -2,10 +2,11 @@
 
 ``dynamics``: the paper's HUND+SO+GT + Dynamics analogue (SO+GT kinematics, then the
 trajectory optimisation with the default preset); ``dynamics-so``: on the SO kinematics;
-``dynamics-full``: the default preset with all the paper's objective terms and weights (the
-default has no COM term); ``dynamics-<ablation>`` (no2d, no3d, nocom, nocompose, noprior): the
-bottom half of the paper's Table 2, that full model with objective terms removed. Window
-checkpoints go to the stage cache, so an interrupted benchmark resumes its dynamics runs.
+``dynamics-full``: the default preset with the paper's objective terms and weights (the
+default has no COM term and adds the swing term); ``dynamics-<ablation>`` (no2d, no3d, nocom,
+nocompose, noprior): the bottom half of the paper's Table 2, that full model with objective
+terms removed. Window checkpoints go to the stage cache, so an interrupted benchmark resumes
+its dynamics runs.
 """
 
 from __future__ import annotations
