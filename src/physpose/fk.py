@@ -110,6 +110,18 @@ def fk_qpos(bones, qpos):
     return fk(bones, qpos[..., 0:3], qpos[..., 3:7], qpos[..., 7:NQ])
 
 
+def site_positions(model: mujoco.MjModel, site_ids, qpos: np.ndarray) -> np.ndarray:
+    """World positions (T, len(site_ids), 3) m of the given sites for qpos (T, 55), from
+    MuJoCo's kinematics of ``model``."""
+    data = mujoco.MjData(model)
+    out = np.empty((len(qpos), len(site_ids), 3))
+    for t, row in enumerate(qpos):
+        data.qpos[:] = row
+        mujoco.mj_kinematics(model, data)
+        out[t] = data.site_xpos[site_ids]
+    return out
+
+
 def fk_mujoco(body, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The same points from MuJoCo's own kinematics of a built Body (physpose.body).
 
@@ -118,14 +130,9 @@ def fk_mujoco(body, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     q = np.atleast_2d(np.asarray(qpos, dtype=float))
     if q.shape[-1] != NQ:
         raise ValueError(f"qpos must have {NQ} columns, got shape {q.shape}")
-    data = mujoco.MjData(body.model)
-    joints = np.empty((len(q), len(body.joint_site_ids), 3))
-    landmarks = np.empty((len(q), len(body.landmark_site_ids), 3))
-    for t, row in enumerate(q):
-        data.qpos[:] = row
-        mujoco.mj_kinematics(body.model, data)
-        joints[t] = data.site_xpos[body.joint_site_ids]
-        landmarks[t] = data.site_xpos[body.landmark_site_ids]
+    ids = np.concatenate([body.joint_site_ids, body.landmark_site_ids])
+    joints, landmarks = np.split(site_positions(body.model, ids, q),
+                                 [len(body.joint_site_ids)], axis=1)
     if np.ndim(qpos) == 1:
         return joints[0], landmarks[0]
     return joints, landmarks

@@ -49,6 +49,7 @@ import numpy as np
 
 from physpose.dynamics import quat
 from physpose.dynamics.rollout import FrameSamples
+from physpose.fk import site_positions
 from physpose.joints import LANDMARK_NAMES
 from physpose.metrics import transform_points
 from physpose.skeleton import DOF_LIMITS, NUM_JOINTS3
@@ -125,13 +126,7 @@ def joint_quaternions(qpos: np.ndarray) -> np.ndarray:
 def landmark_sites(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     """World positions (T, 33, 3) m of the landmark sites for qpos (T, 55)."""
     ids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name) for name in LANDMARK_NAMES]
-    data = mujoco.MjData(model)
-    out = np.empty((len(qpos), len(ids), 3))
-    for t, q in enumerate(qpos):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        out[t] = data.site_xpos[ids]
-    return out
+    return site_positions(model, ids, qpos)
 
 
 def root_relative_feet(landmarks: np.ndarray, qpos: np.ndarray) -> np.ndarray:
