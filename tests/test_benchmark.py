@@ -15,8 +15,8 @@ from physpose.benchmark.runner import BenchmarkConfig, results_document, run_cli
 from physpose.benchmark.scoring import TRUTH_ROW
 from physpose.cli import main
 from physpose.errors import PhysposeError
-from physpose.joints import JOINT_NAMES, joints_from_landmarks
-from physpose.metrics import transform_points
+from physpose.joints import JOINT_INDEX, JOINT_NAMES, LANDMARK_INDEX, joints_from_landmarks
+from physpose.metrics import project, transform_points
 from physpose.mocap import MocapClip
 from physpose.reconstruction import Reconstruction
 
@@ -56,6 +56,32 @@ def _walk(seconds: float = 1.2) -> MocapClip:
 @pytest.fixture(scope="module")
 def clip() -> Clip:
     return mocap_clip(_walk(), MaterialConfig(max_seconds=1.0), name="walk")
+
+
+def test_noiseless_material_sees_the_truth(clip):
+    clean = mocap_clip(_walk(), MaterialConfig(max_seconds=1.0, noiseless=True), name="walk")
+    hips = [LANDMARK_INDEX["left_hip"], LANDMARK_INDEX["right_hip"]]
+    truth = project(clean.truth.joints[:, [JOINT_INDEX["l_hip"], JOINT_INDEX["r_hip"]]],
+                    clean.truth.K, clean.truth.T_world2cam)
+    np.testing.assert_allclose(clean.observations.keypoints2d[:, hips, :2], truth, atol=1e-6)
+    assert np.abs(clip.observations.keypoints2d[:, hips, :2] - truth).max() > 1.0  # default
+
+
+def test_cli_noiseless_flag_reaches_the_material(tmp_path, monkeypatch):
+    seen = {}
+
+    def fake_run(materials, cfg, **kwargs):
+        seen["cfg"] = cfg
+        return results_document([], [], cfg)
+
+    monkeypatch.setattr("physpose.cli.benchmark.run_benchmark", fake_run)
+    clip_file = tmp_path / "x.bvh"
+    clip_file.write_text("")  # exists; the fake runner does not read it
+    assert main(["benchmark", "--mocap", str(clip_file), "--noiseless",
+                 "--out", str(tmp_path / "out")]) == 0
+    assert seen["cfg"].material.noiseless
+    assert main(["benchmark", "--mocap", str(clip_file), "--out", str(tmp_path / "out")]) == 0
+    assert not seen["cfg"].material.noiseless
 
 
 def _oracle(truth_clip: Clip, yaw_deg: float = 40.0):

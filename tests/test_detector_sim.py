@@ -22,10 +22,7 @@ from physpose.joints import (
 from physpose.metrics import project
 from physpose.mocap import MocapClip
 
-NOISELESS = DetectorSimConfig(
-    distance=4.0, sigma_2d_white=0.0, sigma_2d_drift=0.0, sigma_3d_white=0.0,
-    sigma_3d_drift=0.0, scale_bias_mean=1.0, scale_bias_sigma=0.0, depth_scale_mean=1.0,
-    depth_scale_sigma=0.0, lean_bias_sigma_deg=0.0, outlier_rate=0.0, swap_rate=0.0)
+NOISELESS = DetectorSimConfig.noiseless(distance=4.0)
 
 
 def walking_clip(frames: int = 50, fps: float = 25.0, speed: float = 1.0) -> MocapClip:
@@ -101,6 +98,14 @@ def test_noiseless_simulation_is_the_projection_of_the_truth():
     assert obs.world_landmarks[:, LANDMARK_INDEX["nose"], 1].mean() < -0.5   # head up = -y
     assert obs.fps == 25.0 and obs.image_size == (1920, 1080) and obs.camera_K is None
     assert obs.timestamps == pytest.approx(np.arange(50) / 25.0)
+
+
+def test_noiseless_config_keeps_the_confidence_model_and_takes_overrides():
+    cfg = DetectorSimConfig.noiseless(seed=3, azimuth_deg=60.0)
+    assert cfg.seed == 3 and cfg.azimuth_deg == 60.0
+    assert cfg.far_side_drop == DetectorSimConfig().far_side_drop > 0
+    assert cfg.outlier_rate == cfg.swap_rate == cfg.sigma_2d_white == cfg.sigma_3d_drift == 0.0
+    assert cfg.depth_scale_mean == cfg.scale_bias_mean == 1.0
 
 
 def test_same_seed_same_output_other_seed_other_output():

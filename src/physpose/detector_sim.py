@@ -130,6 +130,17 @@ class DetectorSimConfig:
     known_intrinsics: bool = False  # put K into the Observations (a calibrated camera)
     seed: int = 0
 
+    @classmethod
+    def noiseless(cls, **fields) -> DetectorSimConfig:
+        """A detector that sees the truth: no 2d or 3d noise, per-clip biases, outliers or
+        swaps (the confidence model stays). An oracle input: what a later stage loses on
+        consistent, correct detections is its own error, not the detector's."""
+        clean = dict(sigma_2d_white=0.0, sigma_2d_drift=0.0, sigma_3d_white=0.0,
+                     sigma_3d_drift=0.0, scale_bias_mean=1.0, scale_bias_sigma=0.0,
+                     depth_scale_mean=1.0, depth_scale_sigma=0.0, lean_bias_sigma_deg=0.0,
+                     outlier_rate=0.0, swap_rate=0.0)
+        return cls(**{**clean, **fields})
+
 
 @dataclass(frozen=True, eq=False)
 class SimulatedCapture:

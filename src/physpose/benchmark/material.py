@@ -39,6 +39,7 @@ class MaterialConfig:
     known_extrinsics: bool = False  # tell variants the camera pose (then ground is not scored)
     known_height: bool = False    # tell variants the person's stature when the material has it
     seed: int = 0                 # detector simulator seed
+    noiseless: bool = False       # mocap seen by a detector without noise or biases (an oracle)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fps) and self.fps > 0):
@@ -173,7 +174,9 @@ def mocap_clip(motion: MocapClip, cfg: MaterialConfig, name: str) -> Clip:
     """A benchmark clip from ground-truth motion: cropped, then seen by the detector simulator."""
     start = time.perf_counter()
     motion = crop_mocap(motion, cfg.max_seconds)
-    capture = simulate_detections(motion, DetectorSimConfig(seed=cfg.seed))
+    detector = DetectorSimConfig.noiseless(seed=cfg.seed) if cfg.noiseless \
+        else DetectorSimConfig(seed=cfg.seed)
+    capture = simulate_detections(motion, detector)
     context = VariantContext(
         camera_K=capture.camera_K if cfg.known_intrinsics else None,
         camera_T_world2cam=capture.camera_T_world2cam if cfg.known_extrinsics else None,

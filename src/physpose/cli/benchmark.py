@@ -42,6 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--known-height", action="store_true",
                    help="give variants the person's stature when the material has it (mocap)")
     p.add_argument("--seed", type=int, default=0, help="detector simulator seed")
+    p.add_argument("--noiseless", action="store_true",
+                   help="simulate motion-capture detections without noise or biases: an oracle "
+                        "input, so what a variant still loses is its own error")
     p.add_argument("--out", type=Path, help="output folder for results.json and results.md")
     p.set_defaults(func=run)
 
@@ -82,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
                           material=MaterialConfig(fps=args.fps, max_seconds=args.max_seconds,
                                                   known_extrinsics=args.known_extrinsics,
                                                   known_height=args.known_height,
-                                                  seed=args.seed))
+                                                  seed=args.seed, noiseless=args.noiseless))
     command = shlex.join(["physpose", *sys.argv[1:]]) if sys.argv[1:2] == ["benchmark"] \
         else "physpose benchmark"
     doc = run_benchmark(materials, cfg, skipped=skipped, command=command)
