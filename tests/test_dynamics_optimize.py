@@ -12,11 +12,12 @@ from physpose.body import build_body
 from physpose.dynamics import TERMS, DynamicsConfig, optimize_dynamics
 from physpose.dynamics import checkpoint
 from physpose.dynamics.balance import BalanceGains
-from physpose.dynamics.optimize import _cma, _window_seed
+from physpose.dynamics.optimize import _cma, _window_seed, searched_dofs
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.dynamics.windows import blend_weights, plan_windows
 from physpose.errors import PhysposeError
 from physpose.shape import BodyShape
+from physpose.skeleton import DOF_NAMES
 
 TINY = DynamicsConfig(window=0.4, overlap=0.16, popsize=4, iterations=2, knot_spacing=0.1)
 
@@ -74,7 +75,6 @@ def test_same_seed_same_result_and_another_seed_differs(clip):
 def test_searching_legs_and_trunk_keeps_the_other_targets(clip):
     res = run(clip, dataclasses.replace(TINY, search="legs_trunk"), checkpoints=False)
     init = run(clip, dataclasses.replace(TINY, iterations=0), checkpoints=False)
-    from physpose.dynamics.optimize import searched_dofs
     kept = np.setdiff1d(np.arange(48), searched_dofs("legs_trunk"))
     assert len(kept) == 24
     np.testing.assert_allclose(res.ctrl[:, kept], init.ctrl[:, kept], atol=1e-12)
@@ -223,3 +223,14 @@ def test_mismatched_inputs_are_refused(clip):
     bad = dataclasses.replace(fit, qpos=np.where(np.arange(55) == 9, np.nan, fit.qpos))
     with pytest.raises(PhysposeError, match="not finite"):
         optimize_dynamics(body, bad, obs, TINY, checkpoints=False, progress=False)
+
+
+def test_search_sets():
+    """Which hinges each search set varies: legs only, legs and trunk, or all 48."""
+    names = {DOF_NAMES[k].split("_")[1] for k in searched_dofs("legs")}
+    assert names == {"hip", "knee", "ankle"} and len(searched_dofs("legs")) == 18
+    trunk = {DOF_NAMES[k].split("_")[0] for k in searched_dofs("legs_trunk")}
+    assert len(searched_dofs("legs_trunk")) == 24 and {"spine", "thorax"} <= trunk
+    assert len(searched_dofs("all")) == 48
+    with pytest.raises(PhysposeError, match="search"):
+        DynamicsConfig(search="arms")

@@ -15,7 +15,8 @@ from physpose.dynamics.controller import ControllerGains
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.errors import PhysposeError
 
-SEARCH_SETS = ("all", "legs_trunk")  # hinges whose targets CMA-ES varies (optimize.searched_dofs)
+# Hinges whose targets CMA-ES varies (optimize.searched_dofs).
+SEARCH_SETS = ("all", "legs_trunk", "legs")
 
 
 @dataclass(frozen=True)
@@ -47,11 +48,12 @@ class DynamicsConfig:
     state (a discontinuity instead of a fall that would carry on; recorded as reset_after); a
     window whose COM strays this far at an earlier kept frame is cut there and a window from
     that frame restarts (recorded as cut_at).
-    search: "all" hinges, or "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
-    needs; arms, neck and head keep their inverse-dynamics targets). candidates: whole-clip
-    optimisations with seeds seed, seed + 1, ...; the one with the lowest mean window loss is
-    kept (open-loop balance is chaotic: the same clip drifts under one seed and not under
-    another, and a lower loss goes with a lower error; docs/dynamics.md). seed: CMA-ES seed.
+    search: "all" hinges, "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
+    needs; arms, neck and head keep their inverse-dynamics targets), or "legs" (hips, knees,
+    ankles; the trunk keeps its start targets too). candidates: whole-clip optimisations
+    with seeds seed, seed + 1, ...; the one with the lowest mean window loss is kept
+    (open-loop balance is chaotic: the same clip drifts under one seed and not under another,
+    and a lower loss goes with a lower error; docs/dynamics.md). seed: CMA-ES seed.
     place_stretches: move each continuous simulated stretch (between restarts) horizontally so
         that its COM matches the estimate's on average (sequential runs on a floor without
         obstacles, where the moved stretch is the same simulation; stretches.py).

@@ -124,7 +124,8 @@ def searched_dofs(search: str) -> np.ndarray:
     """Indices (DOF_NAMES) of the hinges whose targets the search varies."""
     if search == "all":
         return np.arange(len(DOF_NAMES))
-    return np.array([k for k, n in enumerate(DOF_NAMES) if n.split("_")[0] in ("spine", "thorax")
+    trunk = ("spine", "thorax") if search == "legs_trunk" else ()
+    return np.array([k for k, n in enumerate(DOF_NAMES) if n.split("_")[0] in trunk
                      or n.split("_")[1] in ("hip", "knee", "ankle")])
 
 
