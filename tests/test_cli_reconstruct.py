@@ -42,6 +42,7 @@ def _args(*argv: str):
     (["--ground-stiffness", "0"], "ground stiffness 0.0 must be positive"),
     (["--height", "9"], "height 9.0 m is outside"),
     (["--candidates", "0"], "candidates must be >= 1"),
+    (["--searches", "0"], "searches must be >= 1"),
     (["--balance-hz", "-1"], "balance gains"),
     (["--weight", "com=-1"], "the weight must be a number >= 0"),
     (["--weight", "com=heavy"], "the weight must be a number >= 0"),
@@ -102,6 +103,8 @@ def test_flags_make_the_pipeline_config():
     assert default.dynamics.candidates == 1
     assert pipeline_config(_args("v.mp4", "--out", "o", "--candidates", "3")
                            ).dynamics.candidates == 3
+    assert pipeline_config(_args("v.mp4", "--out", "o", "--searches", "2")
+                           ).dynamics.searches == 2
     assert not default.dynamics.balance.enabled
     assert default.dynamics.place_stretches
     assert not pipeline_config(_args("v.mp4", "--out", "o", "--no-place-stretches")

@@ -234,3 +234,28 @@ def test_search_sets():
     assert len(searched_dofs("all")) == 48
     with pytest.raises(PhysposeError, match="search"):
         DynamicsConfig(search="arms")
+
+
+def test_averaged_searches_keep_the_average_unless_it_is_worse_than_every_search(clip):
+    cfg = dataclasses.replace(TINY, popsize=6, iterations=3)
+    res = run(clip, dataclasses.replace(cfg, searches=3), checkpoints=False)
+    single = run(clip, cfg, checkpoints=False)
+    per_search = 1 + cfg.iterations * (cfg.popsize + 1)
+    kept = []
+    for w in res.windows:
+        assert len(w["search_losses"]) == 3
+        if w["kept"] == "average":   # three searches from one start, plus the average's rollout
+            assert w["evaluations"] == 3 * per_search + 1
+            assert w["loss_final"] <= max(w["search_losses"])
+        else:                        # the average was worse than every search: the best is kept
+            assert w["loss_final"] == min(w["search_losses"])
+            assert w["kept"] == f"search {int(np.argmin(w['search_losses']))}"
+        kept.append(w["kept"])
+    assert "average" in kept
+    # One search is the former behaviour (the first side-by-side search keeps the seed), and
+    # leaves the checkpoint key as it was.
+    assert single.windows[0]["search_losses"] == [single.windows[0]["loss_final"]]
+    assert res.windows[0]["search_losses"][0] == pytest.approx(single.windows[0]["loss_final"])
+    assert "searches" not in cfg.identity() and res.config["searches"] == 3
+    with pytest.raises(PhysposeError, match="searches"):
+        DynamicsConfig(searches=0)

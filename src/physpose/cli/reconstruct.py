@@ -54,6 +54,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--candidates", type=int, metavar="N",
                    help="optimise the whole clip N times (seeds 0..N-1) and keep the run with "
                         "the lowest loss: N times the time (default 1)")
+    p.add_argument("--searches", type=int, metavar="N",
+                   help="CMA-ES searches per window side by side (other seeds, the same "
+                        "start); their average is kept, which cancels most of each search's "
+                        "random walk: N times the search time (default: the preset's)")
     p.add_argument("--balance-hz", type=float, metavar="HZ",
                    help="closed-loop balance feedback (centre of mass through the standing "
                         "ankles) in every simulated sample, Hz, e.g. 0.5; 0 (the default) is "
@@ -162,6 +166,8 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     dynamics = config.dynamics
     if args.candidates is not None:
         dynamics = dataclasses.replace(dynamics, candidates=args.candidates)
+    if args.searches is not None:
+        dynamics = dataclasses.replace(dynamics, searches=args.searches)
     if args.weight:
         dynamics = dataclasses.replace(dynamics, weights=parse_weights(args.weight,
                                                                        dynamics.weights))

@@ -50,7 +50,10 @@ class DynamicsConfig:
     that frame restarts (recorded as cut_at).
     search: "all" hinges, "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
     needs; arms, neck and head keep their inverse-dynamics targets), or "legs" (hips, knees,
-    ankles; the trunk keeps its start targets too). candidates: whole-clip optimisations
+    ankles; the trunk keeps its start targets too). searches: CMA-ES searches of each window
+    side by side under other seeds, from the same start; the average of their results is kept
+    unless it is invalid or worse than all of them (their offsets from the start are mostly
+    uncorrelated random walk, which the average cancels). candidates: whole-clip optimisations
     with seeds seed, seed + 1, ...; the one with the lowest mean window loss is kept
     (open-loop balance is chaotic: the same clip drifts under one seed and not under another,
     and a lower loss goes with a lower error; docs/dynamics.md). seed: CMA-ES seed.
@@ -87,6 +90,7 @@ class DynamicsConfig:
     # 0.10 was no better (docs/dynamics.md).
     reset_distance: float = 0.15
     search: str = "legs_trunk"
+    searches: int = 1
     candidates: int = 1
     place_stretches: bool = True
     seed: int = 0
@@ -102,7 +106,7 @@ class DynamicsConfig:
         if not 0 <= self.overlap < self.window:
             raise PhysposeError(f"dynamics overlap {self.overlap} s must be in [0, window)",
                                 remedy="choose an overlap shorter than the window")
-        for name in ("popsize", "parallel_windows", "nthread", "candidates"):
+        for name in ("popsize", "parallel_windows", "nthread", "candidates", "searches"):
             if getattr(self, name) < 1:
                 raise PhysposeError(f"dynamics config {name} must be >= 1",
                                     remedy="use a preset (fast or paper)")
@@ -125,6 +129,8 @@ class DynamicsConfig:
             out.pop("balance")  # switched off: the same runs (and checkpoints) as before it
         if self.weights.swing == 0:
             out["weights"].pop("swing")  # likewise the swing term (added in stop 21)
+        if self.searches == 1:
+            out.pop("searches")  # likewise one search per window (averaging added in stop 25)
         return out
 
     def window_identity(self) -> dict:

@@ -280,6 +280,54 @@ class _Search:
         return best, initial
 
 
+def _copy_seed(seed: int, copy: int) -> int:
+    """CMA-ES seed of the copy-th side-by-side search of a window (copy 0 keeps ``seed``)."""
+    return seed if copy == 0 else (seed + 104_729 * copy) % (2 ** 31 - 1) + 1
+
+
+def _search_averaged(problems: list[WindowProblem], simulator: Simulator, setup: _Setup,
+                     cfg: DynamicsConfig, timing: dict, seeds: list[int], label: str,
+                     progress: bool, force_start: int | None = None
+                     ) -> tuple[list[WindowProblem], list[_Best], list[dict], list[int]]:
+    """Search every problem ``cfg.searches`` times side by side (other seeds, shared rollouts)
+    and keep the average of the searches' results where it is valid and no worse than the
+    worst of them, else the best search's. Returns, per problem: the problem as searched (its
+    chosen start), the kept result, its initial record (``kept``: "average" or "search k")
+    and the number of evaluations.
+
+    Why: the searches' offsets from their common start are nearly uncorrelated (0.13 on
+    motion-capture windows, docs/dynamics.md, Averaged searches): most of each is CMA-ES's
+    random walk in directions the loss hardly sees, which the average cancels while it keeps
+    the correction they share."""
+    n = cfg.searches
+    copies = [p for p in problems for _ in range(n)]
+    search = _Search(copies, simulator, setup, cfg, timing)
+    bests, initials = search.run([_copy_seed(s, c) for s in seeds for c in range(n)], label,
+                                 progress, force_start=force_start)
+    out: tuple[list, list, list, list] = ([], [], [], [])
+    for i in range(len(problems)):
+        rows = list(range(i * n, (i + 1) * n))
+        evaluations = sum(search.evaluations[r] for r in rows)
+        # Offsets add to a start guess: only searches from the same start can be averaged.
+        same = [r for r in rows if initials[r]["start"] == initials[rows[0]]["start"]]
+        kept, label_kept = min(rows, key=lambda r: bests[r].fitness), None
+        best = bests[kept]
+        if len(same) > 1:
+            x = np.mean([bests[r].x for r in same], axis=0)[None]
+            ((scores, part),) = search._evaluate([search.problems[rows[0]]], [x])
+            frames = len(search.problems[rows[0]].positions)
+            average = _Search._update(None, x, scores, part, ranked_fitness(scores, frames))
+            evaluations += 1
+            if average.valid and average.loss <= max(bests[r].loss for r in same):
+                kept, best, label_kept = same[0], average, "average"
+        out[0].append(search.problems[kept])
+        out[1].append(best)
+        out[2].append(dict(initials[rows[0]], kept=label_kept or f"search {kept - rows[0]}",
+                           search_losses=[bests[r].loss for r in rows]))
+        out[3].append(evaluations)
+    return out
+
+
 def _frame_outputs(setup: _Setup, b: _Best, win: Window, frames: np.ndarray) -> dict:
     traj = Trajectories(states=b.states[None], sensors=b.sensors[None],
                         broken=np.zeros((1, len(b.states)), dtype=bool))
@@ -296,6 +344,7 @@ def _record(win: Window, best: _Best, initial: dict, evaluations: int, seconds: 
             "initial_valid": initial["valid"], "loss_final": best.loss, "valid": best.valid,
             "start": ("inverse_dynamics", "tracking")[initial["start"]],
             "attempts": initial.get("attempts", 1), "handover_error": initial.get("handover_error"),
+            "kept": initial.get("kept", "search 0"), "search_losses": initial.get("search_losses"),
             "terms_final": best.terms, "weights": weights.as_dict(), "seconds": seconds}
 
 
@@ -320,19 +369,19 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
     chosen, evaluations, first_start = None, 0, None
     for attempt in range(cfg.retries + 1):
         attempt_cfg = dataclasses.replace(cfg, sigma0=cfg.sigma0 * 1.5 ** attempt)
-        search = _Search([problem], simulator, setup, attempt_cfg, timing)
         # The first retry of a window with two start guesses goes on from the other one: the
         # better-scoring start can still be the one heading for a fall.
         force = 1 - first_start if attempt == 1 and problem.alternatives else None
-        (best,), (initial,) = search.run([_window_seed(cfg.seed + 7919 * attempt, w)],
-                                         label + (f" retry {attempt}" if attempt else ""),
-                                         progress, force_start=force)
+        (searched,), (best,), (initial,), (count,) = _search_averaged(
+            [problem], simulator, setup, attempt_cfg, timing,
+            [_window_seed(cfg.seed + 7919 * attempt, w)],
+            label + (f" retry {attempt}" if attempt else ""), progress, force_start=force)
         if attempt == 0:
             first_start = initial["start"]
-        evaluations += search.evaluations[0]
+        evaluations += count
         error = _handover_error(setup, best, problem.window, step_end) if best.valid else np.inf
         if chosen is None or error < chosen[3]:
-            chosen = (search.problems[0], best, initial, error)
+            chosen = (searched, best, initial, error)
         if error <= cfg.retry_distance:
             break
     searched, best, initial, error = chosen
@@ -439,15 +488,16 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
         problems = [_problem(setup, wins[w], setup.coefs0,
                              _kinematic_state(setup, wins[w].start_step, cfg.ground_snap), 0, None,
                              cfg) for w in group]
-        search = _Search(problems, simulator, setup, cfg, timing)
         label = f"dynamics windows {group[0] + 1}-{group[-1] + 1}/{len(wins)}"
-        bests, initials = search.run([_window_seed(cfg.seed, w) for w in group], label, progress)
+        _, bests, initials, counts = _search_averaged(
+            problems, simulator, setup, cfg, timing, [_window_seed(cfg.seed, w) for w in group],
+            label, progress)
         seconds = (time.perf_counter() - start) / len(group)
         for i, w in enumerate(group):
             win, best = wins[w], bests[i]
             out = _frame_outputs(setup, best, win, win.frames)
             ctrl = best.ctrl
-            record = _record(win, best, initials[i], search.evaluations[i], seconds, cfg.weights)
+            record = _record(win, best, initials[i], counts[i], seconds, cfg.weights)
             arrays = {"ctrl": ctrl, **out}
             if folder is not None:
                 checkpoint.save_window(folder, w, arrays, record)
