@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from physpose import __version__
+from physpose import __version__, diagnostics
 from physpose.body import BodyConfig, build_body
 from physpose.cache import atomic_path
 from physpose.dynamics import PRESETS as DYNAMICS_PRESETS
@@ -54,6 +55,15 @@ class PipelineConfig:
 
     def to_json(self) -> dict:
         return json.loads(json.dumps(dataclasses.asdict(self), default=str))
+
+
+_log = logging.getLogger(__name__)
+
+
+def _warn(message: str | None) -> None:
+    """Tell the user about a problem in the input (diagnostics.py) as soon as it is known."""
+    if message:
+        _log.warning(message)
 
 
 def load_observations(source: str | Path | Observations, cfg: ObserveConfig,
@@ -96,19 +106,27 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
 
     obs = load_observations(video_or_observations, config.observe, progress)
     lap("observe")
+    jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
+    _warn(diagnostics.jumps_message(jumps, obs.fps))
     kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
                          **({"log": stderr_log} if progress else {}))
     lap("kinematics")
+    raised = diagnostics.raised_runs(kin.joints, kin.fps)
+    _warn(diagnostics.raised_message(raised, kin.fps))
     body = build_body(kin.shape, config.scene, config.body)
     lap("body")
     phys = optimize_dynamics(body, kin, obs, config.dynamics, checkpoint_dir=windows,
                              progress=progress)
     lap("dynamics")
+    invalid = diagnostics.invalid_window_runs(phys.windows)
+    _warn(diagnostics.invalid_message(invalid, kin.fps))
     recon = kin.to_reconstruction(obs, body_mjcf=body.xml).replace(
         joints_physics=phys.joints, qpos_physics=phys.qpos, landmarks_physics=phys.landmarks)
     meta = dict(recon.meta)
     meta.update(timings_s=timings, dynamics={**phys.meta(), "timings": phys.timings},
-                physpose_version=__version__)
+                physpose_version=__version__,
+                diagnostics={"person_jumps": jumps, "raised": [list(r) for r in raised],
+                             "invalid_windows": [list(r) for r in invalid]})
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)
     resolved = {"stage": "reconstruct", "physpose_version": __version__,

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from physpose import diagnostics
 from physpose.dynamics import PRESETS
 from physpose.dynamics.objective import TERMS, ObjectiveWeights
 from physpose.errors import PhysposeError
@@ -276,6 +277,16 @@ def undetected_line(recon: Reconstruction) -> str | None:
             "the motion there is inferred from the frames around them, not observed")
 
 
+def diagnostics_lines(recon: Reconstruction) -> list[str]:
+    """The warnings on the input that the pipeline found (physpose.diagnostics), if any."""
+    found = recon.meta.get("diagnostics", {})
+    lines = [diagnostics.jumps_message(found.get("person_jumps", []), recon.fps),
+             diagnostics.raised_message([tuple(r) for r in found.get("raised", [])], recon.fps),
+             diagnostics.invalid_message([tuple(r) for r in found.get("invalid_windows", [])],
+                                         recon.fps)]
+    return [line for line in lines if line]
+
+
 def print_summary(recon: Reconstruction, out: Path, written: dict[str, Path],
                   metrics: dict | None, timings: dict[str, float]) -> None:
     """The end-of-run summary: metrics table, files and time per stage."""
@@ -287,6 +298,8 @@ def print_summary(recon: Reconstruction, out: Path, written: dict[str, Path],
         print(undetected)
     if recon.has_physics:
         print(restarts_line(recon))
+    for line in diagnostics_lines(recon):
+        print(f"warning: {line}")
     if metrics:
         print("\nmetrics (no ground truth needed; docs/metrics.md):")
         print(metrics_table(metrics))

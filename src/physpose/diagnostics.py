@@ -1,0 +1,127 @@
+"""Problems in the input that a user should hear about before trusting a reconstruction.
+
+physpose follows one person standing on one modelled floor. Two common ways real footage
+breaks that, found on a real clip the project had not seen (Sports2D's demo: the detector
+follows a man standing on a 2 m high box, jumps to a woman walking on the lawn while he
+somersaults off it, and back), and what the dynamics stage makes of them:
+
+- `person_jumps`: the detected person moves further between two detections than a body can
+  (another person, or a cut in the video). The fit then joins two people into one motion.
+- `raised_runs`: the kinematic estimate's feet stay well above the floor for longer than any
+  jump lasts: the person stands on something the scene lacks, or the floor was misjudged. The
+  simulated body then falls to the floor and every sample of those windows is invalid.
+- `invalid_window_runs`: the frames of dynamics windows in which no simulated sample stayed
+  valid (the output there is the least bad fall, not a reconstruction).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from physpose.metrics import foot_points
+from physpose.reconstruction import frame_runs
+
+MIN_CONFIDENCE = 0.3       # landmarks that count for the person's image box
+JUMP_SIZES = 0.4           # a jump: the box centre moves more than this many box diagonals ...
+JUMP_SPEED = 6.0           # ... plus this many box diagonals per second between the detections
+RAISED_HEIGHT = 0.3        # m, lowest sole point above the floor ...
+RAISED_SECONDS = 1.0       # ... for at least this long (no jump keeps both feet up that long)
+
+
+def _boxes(keypoints2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame: the centre (T, 2) and diagonal (T,) of the confident landmarks' image box,
+    and whether the frame has at least 4 such landmarks (T,)."""
+    conf = keypoints2d[..., 2] >= MIN_CONFIDENCE
+    xy = keypoints2d[..., :2]
+    big = np.where(conf[..., None], xy, np.inf).min(axis=1)
+    small = np.where(conf[..., None], xy, -np.inf).max(axis=1)
+    ok = conf.sum(axis=1) >= 4
+    big[~ok], small[~ok] = 0.0, 0.0
+    centre = 0.5 * (big + small)
+    diagonal = np.linalg.norm(small - big, axis=-1)
+    return centre, diagonal, ok
+
+
+def person_jumps(keypoints2d: np.ndarray, detected: np.ndarray, fps: float) -> list[int]:
+    """Frames at which the detected person jumps from where it was at the previous detection
+    further than a body moves: more than JUMP_SIZES + JUMP_SPEED x (seconds between them) box
+    diagonals (the mean of the two boxes), or the box's size changes more than 2x.
+
+    Interpolated frames are skipped (they bridge a gap; the jump shows between the two real
+    detections around it)."""
+    centre, diagonal, ok = _boxes(np.asarray(keypoints2d, dtype=float))
+    frames = np.flatnonzero(np.asarray(detected, dtype=bool) & ok)
+    jumps = []
+    for a, b in zip(frames[:-1], frames[1:]):
+        size = 0.5 * (diagonal[a] + diagonal[b])
+        moved = np.linalg.norm(centre[b] - centre[a])
+        ratio = max(diagonal[a], diagonal[b]) / max(min(diagonal[a], diagonal[b]), 1e-9)
+        if moved > size * (JUMP_SIZES + JUMP_SPEED * (b - a) / fps) or ratio > 2.0:
+            jumps.append(int(b))
+    return jumps
+
+
+def raised_runs(joints: np.ndarray, fps: float) -> list[tuple[int, int, float]]:
+    """(first, last, median height m) of each stretch of at least RAISED_SECONDS in which
+    both feet of a motion (T, 21, 3), world z up with the floor at 0, stay more than
+    RAISED_HEIGHT above the floor."""
+    lowest = foot_points(np.asarray(joints, dtype=float))[..., 2].min(axis=(1, 2))
+    out = []
+    for a, b in frame_runs(lowest > RAISED_HEIGHT):
+        if (b - a + 1) / fps >= RAISED_SECONDS:
+            out.append((a, b, float(np.median(lowest[a:b + 1]))))
+    return out
+
+
+def invalid_window_runs(windows: list[dict]) -> list[tuple[int, int]]:
+    """(first, last) frames covered by dynamics windows with no valid sample, merged."""
+    spans = sorted(tuple(w["frames"]) for w in windows
+                   if isinstance(w, dict) and w.get("valid") is False)
+    merged: list[list[int]] = []
+    for a, b in spans:
+        if merged and a <= merged[-1][1] + 1:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    return [(int(a), int(b)) for a, b in merged]
+
+
+def _at(frame: int, fps: float) -> str:
+    return f"{frame} ({frame / fps:.2f} s)"
+
+
+def _span(a: int, b: int, fps: float) -> str:
+    return f"{a}-{b} ({a / fps:.2f}-{(b + 1) / fps:.2f} s)"
+
+
+def jumps_message(frames: list[int], fps: float) -> str | None:
+    """A warning on `person_jumps`, or None."""
+    if not frames:
+        return None
+    where = ", ".join(_at(f, fps) for f in frames)
+    return (f"input: the detected person jumps further than a body moves at frame"
+            f"{'s' * (len(frames) > 1)} {where}: the detector has probably switched to "
+            "another person (or the video cuts there). physpose follows one person, so the "
+            "motion joins them; analyse one person's stretch with --start/--end, or crop the "
+            "video to that person")
+
+
+def raised_message(runs: list[tuple[int, int, float]], fps: float) -> str | None:
+    """A warning on `raised_runs`, or None."""
+    if not runs:
+        return None
+    where = ", ".join(f"{_span(a, b, fps)}, {h:.2f} m up" for a, b, h in runs)
+    return (f"kinematics: both feet stay above the floor for longer than a jump lasts at frames "
+            f"{where}: the person stands on something the scene does not have, or the floor "
+            "was misjudged. The simulated body falls there; give the support as an obstacle "
+            "(--obstacle box:x,y,z,sx,sy,sz: centre and sizes in world metres, docs/body_model.md)")
+
+
+def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
+    """A warning on `invalid_window_runs`, or None."""
+    if not runs:
+        return None
+    where = ", ".join(_span(a, b, fps) for a, b in runs)
+    return (f"physics: no simulated motion stayed valid (within 1 m of the estimate, above the "
+            f"floor) at frames {where}; the physics output there is the least bad fall, not "
+            "a reconstruction. Use the kinematic motion there (joints_kinematic)")

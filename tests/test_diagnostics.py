@@ -1,0 +1,83 @@
+"""Warnings on the input: the detector switching people, a person standing above the modelled
+floor, dynamics windows without a valid sample."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from physpose import diagnostics
+from physpose.body import build_body
+from physpose.cli.reconstruct import diagnostics_lines
+from physpose.dynamics.synthetic import simulated_clip
+from physpose.shape import BodyShape
+
+
+def _walker(frames: int, fps: float, speed_px: float = 300.0, size: float = 400.0) -> np.ndarray:
+    """(T, 33, 3) detections of a person-sized point cloud crossing the image."""
+    rng = np.random.default_rng(0)
+    shape = rng.uniform(-0.5, 0.5, (33, 2)) * [0.4 * size, size]
+    x = 200.0 + speed_px * np.arange(frames) / fps
+    kp = np.ones((frames, 33, 3))
+    kp[..., 0] = x[:, None] + shape[:, 0]
+    kp[..., 1] = 500.0 + shape[:, 1]
+    return kp
+
+
+@pytest.mark.parametrize("fps", [25.0, 60.0])
+def test_a_person_moving_like_a_person_does_not_jump(fps):
+    kp = _walker(100, fps, speed_px=1200.0)   # 3 body heights per second: a sprint
+    detected = np.ones(100, bool)
+    detected[40:46] = False                    # a gap, bridged across
+    assert diagnostics.person_jumps(kp, detected, fps) == []
+
+
+def test_another_person_or_a_cut_is_a_jump():
+    fps = 25.0
+    kp = _walker(60, fps)
+    kp[30:, :, 0] += 900.0                     # someone else, two body heights to the right
+    assert diagnostics.person_jumps(kp, np.ones(60, bool), fps) == [30]
+    near = _walker(60, fps)
+    centre = near[40:, :, :2].mean(axis=1, keepdims=True)
+    near[40:, :, :2] = centre + 2.5 * (near[40:, :, :2] - centre)  # a much nearer person
+    assert diagnostics.person_jumps(near, np.ones(60, bool), fps) == [40]
+    # Frames with too few confident landmarks neither jump nor hide a jump.
+    kp[28:30, :, 2] = 0.0
+    assert diagnostics.person_jumps(kp, np.ones(60, bool), fps) == [30]
+
+
+@pytest.fixture(scope="module")
+def standing():
+    fit, _, _ = simulated_clip(build_body(BodyShape.from_height(1.7)), "stand", seconds=2.0)
+    return fit.joints, fit.fps
+
+
+def test_feet_above_the_floor_for_longer_than_a_jump(standing):
+    joints, fps = standing
+    assert diagnostics.raised_runs(joints, fps) == []
+    up = joints.copy()
+    up[10:40, :, 2] += 1.5                     # 1.2 s on a 1.5 m high box
+    (run,) = diagnostics.raised_runs(up, fps)
+    assert run[:2] == (10, 39) and run[2] == pytest.approx(1.5, abs=0.05)
+    hop = joints.copy()
+    hop[10:30, :, 2] += 0.5                    # 0.8 s in the air: a jump, not a support
+    assert diagnostics.raised_runs(hop, fps) == []
+
+
+def test_invalid_windows_are_merged_and_every_warning_names_frames_and_a_remedy():
+    windows = [{"frames": [0, 24], "valid": False}, {"frames": [10, 34], "valid": False},
+               {"frames": [20, 44], "valid": True}, {"frames": [50, 74], "valid": False}]
+    assert diagnostics.invalid_window_runs(windows) == [(0, 34), (50, 74)]
+    assert diagnostics.jumps_message([], 25.0) is None
+    assert "142 (5.68 s)" in diagnostics.jumps_message([142], 25.0)
+    assert "--start/--end" in diagnostics.jumps_message([142], 25.0)
+    assert "--obstacle" in diagnostics.raised_message([(0, 142, 1.8)], 25.0)
+    assert "0-142 (0.00-5.72 s)" in diagnostics.raised_message([(0, 142, 1.8)], 25.0)
+    assert "joints_kinematic" in diagnostics.invalid_message([(0, 34)], 25.0)
+    recon = SimpleNamespace(fps=25.0, meta={"diagnostics": {
+        "person_jumps": [142], "raised": [[0, 142, 1.8]], "invalid_windows": []}})
+    lines = diagnostics_lines(recon)
+    assert len(lines) == 2 and "142" in lines[0] and "1.80 m up" in lines[1]
+    assert diagnostics_lines(SimpleNamespace(fps=25.0, meta={})) == []
