@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from physpose.paths import pose2sim_demo_dir, shared_data_dir
+from physpose.paths import pose2sim_demo_dir, shared_data_dir, sports2d_demo_dir
 
 
 @pytest.fixture(scope="session")
@@ -25,3 +25,12 @@ def pose2sim_demo() -> Path:
     if not (root / "videos" / "cam01.mp4").is_file():
         pytest.skip(f"pose2sim demo not found at {root}; run `make data`")
     return root
+
+
+@pytest.fixture(scope="session")
+def sports2d_demo() -> Path:
+    """Sports2D's two-person demo video fetched by `make setup`; skips when it was not fetched."""
+    video = sports2d_demo_dir() / "demo.mp4"
+    if not video.is_file():
+        pytest.skip(f"sports2d demo not found at {video}; run `make data`")
+    return video

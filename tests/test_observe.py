@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 from synthetic_video import make_noise_video
 
+from physpose.diagnostics import person_jumps
 from physpose.errors import PhysposeError
 from physpose.joints import LANDMARK_INDEX as LM
-from physpose.observe import (ObserveConfig, PoseDetector, downsample_mask, fill_gaps,
-                              mask_shape, observe)
+from physpose.observe import (ObserveConfig, PoseDetector, _detect_all, downsample_mask,
+                              fill_gaps, mask_shape, observe)
 from physpose.video import plan_frames, probe, read_frames
 
 
@@ -217,3 +218,22 @@ def test_cache_hit_for_same_settings_miss_when_they_change(pose2sim_demo, tmp_pa
     copy.write_bytes(video.read_bytes())
     moved = observe(copy, cfg, progress=False)
     assert len(calls) == 15 and moved.source == str(copy)  # keyed by content, not by name
+
+
+@pytest.mark.slow
+def test_the_subject_is_followed_when_the_tracker_jumps_to_another_person(sports2d_demo):
+    """Sports2D's demo: the tracker follows a man on a box, loses him as he somersaults off
+    it, takes a woman walking past, then the man again; the second look, masked to where the
+    man can be, follows him throughout."""
+    info = probe(sports2d_demo)
+    plan = plan_frames(info, 25.0, None, None)
+    alone = _detect_all(info, plan, ObserveConfig(use_cache=False), progress=False)  # first look
+    assert len(person_jumps(alone.keypoints2d, alone.detected, alone.fps)) >= 1
+    obs = observe(sports2d_demo, ObserveConfig(use_cache=False), progress=False)
+    assert person_jumps(obs.keypoints2d, obs.detected, obs.fps) == []
+    assert obs.detected.mean() > 0.9
+    # The man lands on the lawn right of the box: the last frames are his, not the woman's
+    # (who leaves on the left).
+    last = np.flatnonzero(obs.detected)[-5:]
+    assert obs.keypoints2d[last][:, [LM["left_hip"], LM["right_hip"]], 0].mean() \
+        > 0.6 * obs.image_size[0]

@@ -28,7 +28,7 @@ RAISED_HEIGHT = 0.3        # m, lowest sole point above the floor ...
 RAISED_SECONDS = 1.0       # ... for at least this long (no jump keeps both feet up that long)
 
 
-def _boxes(keypoints2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def image_boxes(keypoints2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per frame: the centre (T, 2) and diagonal (T,) of the confident landmarks' image box,
     and whether the frame has at least 4 such landmarks (T,)."""
     conf = keypoints2d[..., 2] >= MIN_CONFIDENCE
@@ -49,7 +49,7 @@ def person_jumps(keypoints2d: np.ndarray, detected: np.ndarray, fps: float) -> l
 
     Interpolated frames are skipped (they bridge a gap; the jump shows between the two real
     detections around it)."""
-    centre, diagonal, ok = _boxes(np.asarray(keypoints2d, dtype=float))
+    centre, diagonal, ok = image_boxes(np.asarray(keypoints2d, dtype=float))
     frames = np.flatnonzero(np.asarray(detected, dtype=bool) & ok)
     jumps = []
     for a, b in zip(frames[:-1], frames[1:]):

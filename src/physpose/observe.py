@@ -10,6 +10,12 @@ right-handed frame, i.e. OpenCV camera axes without the translation. (Checked on
 clip by tests/test_observe.py: world x/y grow with image x/y, and the nose lies in front of the
 chest under the right-handed cross product.)
 
+MediaPipe's tracker follows one person and, when it loses that person, takes whichever person
+its detector finds next. When the detections jump like that (`diagnostics.person_jumps`), the
+video is looked at a second time with every frame masked to where the subject can be (the
+longest track and the tracks continuing it; subject.py), and that result is kept if it jumps
+less. Videos whose detections do not jump are looked at once.
+
 Frames without a detection are flagged; gaps of at most `max_gap_frames` between two detected
 frames are filled by linear interpolation (positions, confidences, world landmarks and masks)
 and flagged `interpolated`. Results are cached
@@ -30,11 +36,13 @@ from tqdm import tqdm
 
 from physpose import video as videolib
 from physpose.cache import Cache, stage_key
+from physpose.diagnostics import person_jumps
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
 from physpose.observations import Observations
+from physpose.subject import mask_outside, subject_regions
 
-OBSERVE_VERSION = 1  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 2  # bump when a change alters what observe() returns for the same input
 _log = logging.getLogger(__name__)
 
 
@@ -176,13 +184,28 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
     if cfg.use_cache and (hit := cache.get(key)) is not None:
         return _from_arrays(hit, source=str(video))
     obs = _detect_all(info, plan, cfg, progress)
+    jumps = person_jumps(obs.keypoints2d, obs.detected, obs.fps)
+    if jumps:
+        # The tracker lost its person and took another: look again, with every frame masked
+        # to where the subject (the longest track and those continuing it) can be.
+        _log.warning("%s: the detected person jumps at frames %s; looking again for one "
+                     "person only", video, ", ".join(map(str, jumps)))
+        regions = subject_regions(obs.keypoints2d, obs.detected, obs.fps, info.image_size)
+        again = _detect_all(info, plan, cfg, progress, regions=regions, check=False)
+        left = person_jumps(again.keypoints2d, again.detected, again.fps)
+        if len(left) < len(jumps) and again.detected.sum() >= cfg.min_detection_fraction \
+                * again.num_frames:
+            obs = again
     if cfg.use_cache:
         cache.put(key, _to_arrays(obs))
     return obs
 
 
 def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig,
-                progress: bool) -> Observations:
+                progress: bool, regions: np.ndarray | None = None, check: bool = True
+                ) -> Observations:
+    """Detect in every planned frame; regions (T, 4): image boxes outside which each frame is
+    blacked out first (subject.py). check: fail when too few frames have a detection."""
     t = len(plan.indices)
     kp = np.zeros((t, NUM_LANDMARKS, 3))
     world = np.zeros((t, NUM_LANDMARKS, 3))
@@ -196,6 +219,8 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
         for i, (_, image) in enumerate(videolib.read_frames(info, plan.indices)):
             read = i + 1
             bar.update()
+            if regions is not None:
+                image = mask_outside(image, regions[i])
             found = detector.detect(image)
             if found is None:
                 continue
@@ -206,7 +231,8 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
     if read < t:  # the file ended a little early (within the container's counting slack)
         kp, world, detected = kp[:read], world[:read], detected[:read]
         masks = None if masks is None else masks[:read]
-    _check_detection_rate(info.path, int(detected.sum()), read, cfg)
+    if check:
+        _check_detection_rate(info.path, int(detected.sum()), read, cfg)
     kp, interpolated = fill_gaps(kp, detected, cfg.max_gap_frames)
     world, _ = fill_gaps(world, detected, cfg.max_gap_frames)
     if masks is not None:

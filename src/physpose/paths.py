@@ -32,3 +32,8 @@ def shared_data_dir() -> Path:
 def pose2sim_demo_dir() -> Path:
     """The pose2sim single-person demo (4 calibrated views), fetched by `make data`."""
     return data_dir() / "pose2sim" / "Demo_SinglePerson"
+
+
+def sports2d_demo_dir() -> Path:
+    """Sports2D's two-person demo video (demo.mp4), fetched by `make data`."""
+    return data_dir() / "sports2d"

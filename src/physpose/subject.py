@@ -1,0 +1,98 @@
+"""One person through a clip: which detections are the subject, and where to look for it.
+
+MediaPipe's legacy pose tracker follows one person and, when it loses that person, takes
+whichever person its detector finds next (on Sports2D's demo video it jumps from a man
+somersaulting off a box to a woman walking past, and back). `subject_tracks` splits the
+detections at those jumps (`diagnostics.person_jumps`) into tracks and keeps as the subject the
+track with the most frames plus the tracks that plausibly continue it (a similar image size,
+and a place it can have reached at LINK_SPEED). `subject_regions` gives, per frame, the image
+box the subject can be in: around its own detection, or between its detections before and
+after, widening with the time since it was seen. observe.py runs the detector a second time on
+frames masked to those boxes, so another person is not in view.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from physpose.diagnostics import JUMP_SIZES, image_boxes, person_jumps
+
+LINK_SPEED = 2.0   # box diagonals per second a subject's image box may move while unseen
+LINK_SIZE = 1.5    # at most this ratio between the box sizes of two tracks of one subject
+MARGIN = 0.5       # box diagonals added around the subject's box on every side
+
+
+def subject_tracks(keypoints2d: np.ndarray, detected: np.ndarray, fps: float
+                   ) -> tuple[list[np.ndarray], np.ndarray]:
+    """The detections split at person jumps: (tracks, subject), tracks a list of frame-index
+    arrays in time order and subject a bool array (one per track)."""
+    centre, diagonal, ok = image_boxes(np.asarray(keypoints2d, dtype=float))
+    frames = np.flatnonzero(np.asarray(detected, dtype=bool) & ok)
+    if not len(frames):
+        return [], np.zeros(0, bool)
+    cuts = np.searchsorted(frames, person_jumps(keypoints2d, detected, fps))
+    tracks = np.split(frames, cuts)
+    subject = np.zeros(len(tracks), bool)
+    main = int(np.argmax([len(t) for t in tracks]))
+    subject[main] = True
+
+    def continues(a: int, b: int) -> bool:
+        """Track b is where the subject, last seen at frame a, can be at frame b."""
+        ratio = max(diagonal[a], diagonal[b]) / max(min(diagonal[a], diagonal[b]), 1e-9)
+        size = 0.5 * (diagonal[a] + diagonal[b])
+        reach = size * (JUMP_SIZES + LINK_SPEED * abs(b - a) / fps)
+        return ratio <= LINK_SIZE and np.linalg.norm(centre[b] - centre[a]) <= reach
+
+    last = tracks[main][-1]
+    for k in range(main + 1, len(tracks)):
+        if continues(last, tracks[k][0]):
+            subject[k], last = True, tracks[k][-1]
+    first = tracks[main][0]
+    for k in range(main - 1, -1, -1):
+        if continues(first, tracks[k][-1]):
+            subject[k], first = True, tracks[k][0]
+    return tracks, subject
+
+
+def subject_regions(keypoints2d: np.ndarray, detected: np.ndarray, fps: float,
+                    image_size: tuple[int, int]) -> np.ndarray:
+    """(T, 4) image boxes [x0, y0, x1, y1] (pixels, clipped to the image) where the subject
+    can be in each frame: its box grown by MARGIN diagonals where it was detected; elsewhere
+    the box interpolated between its detections before and after (or held from the nearer
+    one), grown further by LINK_SPEED diagonals per second since or until it was seen."""
+    keypoints2d = np.asarray(keypoints2d, dtype=float)
+    t = len(keypoints2d)
+    width, height = image_size
+    full = np.array([0.0, 0.0, float(width), float(height)])
+    tracks, subject = subject_tracks(keypoints2d, detected, fps)
+    seen = np.concatenate([tr for tr, s in zip(tracks, subject) if s]) if subject.any() \
+        else np.zeros(0, int)
+    if not len(seen):
+        return np.tile(full, (t, 1))
+    conf = keypoints2d[..., 2] >= 0.3
+    xy = keypoints2d[..., :2]
+    lo = np.where(conf[..., None], xy, np.inf).min(axis=1)[seen]
+    hi = np.where(conf[..., None], xy, -np.inf).max(axis=1)[seen]
+    frames = np.arange(t)
+    lo_all = np.stack([np.interp(frames, seen, lo[:, i]) for i in range(2)], axis=1)
+    hi_all = np.stack([np.interp(frames, seen, hi[:, i]) for i in range(2)], axis=1)
+    diagonal = np.linalg.norm(hi_all - lo_all, axis=1)
+    # Frames to the nearest subject detection, before or after.
+    after = np.searchsorted(seen, frames)
+    before_gap = np.where(after > 0, frames - seen[np.maximum(after - 1, 0)], np.inf)
+    at = np.minimum(after, len(seen) - 1)
+    after_gap = np.where(after < len(seen), seen[at] - frames, np.inf)
+    gap = np.minimum(before_gap, after_gap)
+    grow = diagonal * (MARGIN + LINK_SPEED * gap / fps)
+    boxes = np.concatenate([lo_all - grow[:, None], hi_all + grow[:, None]], axis=1)
+    return np.clip(boxes, full[[0, 1, 0, 1]], full[[2, 3, 2, 3]])
+
+
+def mask_outside(image: np.ndarray, box: np.ndarray) -> np.ndarray:
+    """A copy of an image (H, W, 3) with everything outside box [x0, y0, x1, y1] black."""
+    x0, y0 = np.floor(box[:2]).astype(int)
+    x1, y1 = np.ceil(box[2:]).astype(int)
+    out = np.zeros_like(image)
+    out[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)] = \
+        image[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)]
+    return out
