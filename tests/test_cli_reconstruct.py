@@ -105,6 +105,8 @@ def test_flags_make_the_pipeline_config():
                            ).dynamics.candidates == 3
     assert pipeline_config(_args("v.mp4", "--out", "o", "--searches", "2")
                            ).dynamics.searches == 2
+    assert default.auto_support
+    assert not pipeline_config(_args("v.mp4", "--out", "o", "--no-auto-support")).auto_support
     assert not default.dynamics.balance.enabled
     assert default.dynamics.place_stretches
     assert not pipeline_config(_args("v.mp4", "--out", "o", "--no-place-stretches")

@@ -13,6 +13,7 @@ from physpose.dynamics.init import (ground_state, initial_coefficients,
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
 from physpose.dynamics.spline import KnotGrid
 from physpose.dynamics.synthetic import motion_targets, simulated_clip
+from physpose.scene import Box, SceneConfig
 from physpose.shape import BodyShape
 from physpose.skeleton import NV
 
@@ -106,3 +107,10 @@ def test_inverse_dynamics_measures_the_root_force_no_contact_explains(body):
                 for ref in (real, floating)]
     assert np.median(residual[0]) < 0.02  # body weights
     assert np.median(residual[1]) == pytest.approx(1.0, abs=0.02)
+    # Lifted onto a 10 cm box under the feet, the box explains it again (the soles push on
+    # whatever they stand on: floor or box top).
+    on_box = build_body(body.shape, SceneConfig(obstacles=(Box(center=(0.0, 0.0, 0.05),
+                                                                   size=(2.0, 2.0, 0.1)),)))
+    supported = inverse_dynamics(sim_model(on_box).model, floating, on_box.foot_geom_ids, 0.9,
+                                 0.03).root_residual
+    assert np.median(supported) < 0.02

@@ -8,8 +8,9 @@ somersaults off it, and back), and what the dynamics stage makes of them:
 - `person_jumps`: the detected person moves further between two detections than a body can
   (another person, or a cut in the video). The fit then joins two people into one motion.
 - `raised_runs`: the kinematic estimate's feet stay well above the floor for longer than any
-  jump lasts: the person stands on something the scene lacks, or the floor was misjudged. The
-  simulated body then falls to the floor and every sample of those windows is invalid.
+  jump lasts: the person stands on something the scene lacks, or the floor was misjudged.
+  Without a support the simulated body falls to the floor and every sample of those windows is
+  invalid; `support_boxes` gives the scene a box under the feet there.
 - `invalid_window_runs`: the frames of dynamics windows in which no simulated sample stayed
   valid (the output there is the least bad fall, not a reconstruction).
 """
@@ -20,6 +21,7 @@ import numpy as np
 
 from physpose.metrics import foot_points
 from physpose.reconstruction import frame_runs
+from physpose.scene import Box
 
 MIN_CONFIDENCE = 0.3       # landmarks that count for the person's image box
 JUMP_SIZES = 0.4           # a jump: the box centre moves more than this many box diagonals ...
@@ -73,6 +75,38 @@ def raised_runs(joints: np.ndarray, fps: float) -> list[tuple[int, int, float]]:
     return out
 
 
+SUPPORT_MARGIN = 0.3       # m added on every side of the feet's extent for a support box
+RESTING_SPEED = 0.5        # m/s, a foot slower than this rests on its support
+
+
+def support_boxes(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: float
+                  ) -> tuple[Box, ...]:
+    """One box per `raised_runs` stretch, standing on the floor under the feet where they
+    rest (the lower foot slower than RESTING_SPEED; a stretch can end in a leap off the
+    support): its top at the 10th percentile of the resting feet's lowest point (they stand
+    on it, not in it), its sides SUPPORT_MARGIN beyond where the resting soles are. The
+    estimate says that something holds the person up there; this is the simplest such thing.
+    A stretch without resting frames gets none."""
+    soles = foot_points(np.asarray(joints, dtype=float))       # (T, 2, P, 3)
+    centres = soles.mean(axis=2)                                 # (T, 2, 3)
+    speed = np.linalg.norm(np.gradient(centres, axis=0), axis=-1) * fps
+    lower = soles[..., 2].min(axis=2).argmin(axis=1)             # (T,) the lower foot
+    resting = speed[np.arange(len(soles)), lower] < RESTING_SPEED
+    boxes = []
+    for a, b, _ in runs:
+        frames = a + np.flatnonzero(resting[a:b + 1])
+        if not len(frames):
+            continue
+        points = soles[frames].reshape(-1, 3)
+        top = float(np.percentile(soles[frames, ..., 2].min(axis=(1, 2)), 10))
+        lo = points[:, :2].min(axis=0) - SUPPORT_MARGIN
+        hi = points[:, :2].max(axis=0) + SUPPORT_MARGIN
+        centre = 0.5 * (lo + hi)
+        boxes.append(Box(center=(float(centre[0]), float(centre[1]), top / 2),
+                         size=(float(hi[0] - lo[0]), float(hi[1] - lo[1]), top)))
+    return tuple(boxes)
+
+
 def invalid_window_runs(windows: list[dict]) -> list[tuple[int, int]]:
     """(first, last) frames covered by dynamics windows with no valid sample, merged."""
     spans = sorted(tuple(w["frames"]) for w in windows
@@ -113,8 +147,9 @@ def raised_message(runs: list[tuple[int, int, float]], fps: float) -> str | None
     where = ", ".join(f"{_span(a, b, fps)}, {h:.2f} m up" for a, b, h in runs)
     return (f"kinematics: both feet stay above the floor for longer than a jump lasts at frames "
             f"{where}: the person stands on something the scene does not have, or the floor "
-            "was misjudged. The simulated body falls there; give the support as an obstacle "
-            "(--obstacle box:x,y,z,sx,sy,sz: centre and sizes in world metres, docs/body_model.md)")
+            "was misjudged. physpose puts a box under the feet there (--no-auto-support: "
+            "none, and the simulated body falls); give the real support with --obstacle "
+            "box:x,y,z,sx,sy,sz (centre and sizes in world metres, docs/body_model.md)")
 
 
 def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:

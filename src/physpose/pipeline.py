@@ -37,13 +37,18 @@ CHECKPOINT_FOLDER = "dynamics_windows"
 
 @dataclass(frozen=True)
 class PipelineConfig:
-    """Every stage's settings; the kinematic variant defaults to the paper's SO+GT."""
+    """Every stage's settings; the kinematic variant defaults to the paper's SO+GT.
+
+    auto_support: where the estimate's feet stay above the floor for longer than a jump
+    (diagnostics.raised_runs), add a box under them to the scene (diagnostics.support_boxes).
+    """
 
     observe: ObserveConfig = field(default_factory=ObserveConfig)
     kinematics: KinematicConfig = field(default_factory=KinematicConfig)
     body: BodyConfig = field(default_factory=BodyConfig)
     scene: SceneConfig = field(default_factory=SceneConfig)
     dynamics: DynamicsConfig = field(default_factory=lambda: DYNAMICS_PRESETS["fast"])
+    auto_support: bool = True
 
     @classmethod
     def preset(cls, name: str = "fast", **changes) -> PipelineConfig:
@@ -113,7 +118,11 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     lap("kinematics")
     raised = diagnostics.raised_runs(kin.joints, kin.fps)
     _warn(diagnostics.raised_message(raised, kin.fps))
-    body = build_body(kin.shape, config.scene, config.body)
+    scene = config.scene
+    supports = diagnostics.support_boxes(kin.joints, raised, kin.fps) if config.auto_support else ()
+    if supports:
+        scene = dataclasses.replace(scene, obstacles=scene.obstacles + supports)
+    body = build_body(kin.shape, scene, config.body)
     lap("body")
     phys = optimize_dynamics(body, kin, obs, config.dynamics, checkpoint_dir=windows,
                              progress=progress)
@@ -126,6 +135,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     meta.update(timings_s=timings, dynamics={**phys.meta(), "timings": phys.timings},
                 physpose_version=__version__,
                 diagnostics={"person_jumps": jumps, "raised": [list(r) for r in raised],
+                             "supports": [[*b.center, *b.size] for b in supports],
                              "invalid_windows": [list(r) for r in invalid]})
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)

@@ -97,6 +97,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="ground stiffness, 1/s^2 per unit mass (default: a hard floor)")
     g.add_argument("--ground-damping", type=float, metavar="D",
                    help="ground damping, 1/s (default: critical for the stiffness)")
+    g.add_argument("--auto-support", action=argparse.BooleanOptionalAction, default=True,
+                   help="where the person's feet stay above the floor for longer than a jump, "
+                        "put a box under them (default on; --no-auto-support: none, and the "
+                        "simulated body falls there)")
     g.add_argument("--trampoline", action="store_true",
                    help="a soft, springy floor (stiffness 150, damping 1.5)")
     g.add_argument("--obstacle", action="append", default=[], metavar="box:x,y,z,sx,sy,sz[,yaw]",
@@ -178,7 +182,7 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))
     return dataclasses.replace(config, observe=observe, dynamics=dynamics,
-                               scene=scene_config(args))
+                               scene=scene_config(args), auto_support=args.auto_support)
 
 
 def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:

@@ -113,20 +113,44 @@ def friction_pyramid(mu: float, normal: np.ndarray | None = None) -> np.ndarray:
     return np.stack([normal + m * t1, normal - m * t1, normal + m * t2, normal - m * t2])
 
 
+def scene_boxes(model: mujoco.MjModel) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """(centre (3,), rotation (3, 3), half sizes (3,)) of the scene's boxes (obstacles)."""
+    out = []
+    for g in range(model.ngeom):
+        if model.geom_bodyid[g] == 0 and model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
+            rot = np.zeros(9)
+            mujoco.mju_quat2Mat(rot, model.geom_quat[g])
+            out.append((model.geom_pos[g].copy(), rot.reshape(3, 3), model.geom_size[g].copy()))
+    return out
+
+
+def surface_below(point: np.ndarray, boxes: list, reach: float) -> float:
+    """Height of what a point stands on: the highest box top (boxes: `scene_boxes`) under it
+    and at most ``reach`` above it, else the floor, 0."""
+    height = 0.0
+    for centre, rot, half in boxes:
+        local = rot.T @ (point - centre)
+        top = centre[2] + float(np.abs(rot[2]) @ half)  # an upright box's top (yaw only)
+        if abs(local[0]) <= half[0] and abs(local[1]) <= half[1] and top <= point[2] + reach:
+            height = max(height, top)
+    return height
+
+
 def ground_forces(model: mujoco.MjModel, data: mujoco.MjData, wrench: np.ndarray,
-                  points: list[tuple[int, np.ndarray]], mu: float, max_height: float
-                  ) -> np.ndarray:
+                  points: list[tuple[int, np.ndarray]], mu: float, max_height: float,
+                  boxes: list | None = None) -> np.ndarray:
     """Generalised force (nv,) of ground forces at sole points best explaining the root wrench.
 
     data holds the kinematics of the current state. wrench: (6,) the free joint's part of the
-    inverse-dynamics force. Points higher than max_height (m) above z = 0 do not push.
+    inverse-dynamics force. Points higher than max_height (m) above what they stand on (the
+    floor at z = 0, or the top of one of ``boxes``, `scene_boxes`) do not push.
     """
     edges = friction_pyramid(mu)
     columns, costs = [], []
     jacp = np.zeros((3, model.nv))
     for geom, offset in points:
         world = data.geom_xpos[geom] + data.geom_xmat[geom].reshape(3, 3) @ offset
-        height = world[2]
+        height = world[2] - (surface_below(world, boxes, max_height) if boxes else 0.0)
         if height > max_height:
             continue
         mujoco.mj_jac(model, data, jacp, None, world, model.geom_bodyid[geom])
@@ -171,13 +195,14 @@ def inverse_dynamics(model: mujoco.MjModel, ref: Reference, foot_geoms: dict[str
     m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     data = mujoco.MjData(m)
     points = sole_points(m, foot_geoms)
+    boxes = scene_boxes(m)
     torques = np.empty((len(ref.qpos), m.nu))
     residual = np.empty(len(ref.qpos))
     for n in range(len(ref.qpos)):
         data.qpos[:], data.qvel[:], data.qacc[:] = ref.qpos[n], ref.qvel[n], ref.qacc[n]
         mujoco.mj_inverse(m, data)
         need = data.qfrc_inverse.copy()
-        need -= ground_forces(m, data, need[:6], points, mu, contact_height)
+        need -= ground_forces(m, data, need[:6], points, mu, contact_height, boxes)
         torques[n] = need[6:]
         residual[n] = np.linalg.norm(need[:3])  # the free joint's force, world frame (N)
     lo, hi = m.actuator_forcerange[:, 0], m.actuator_forcerange[:, 1]

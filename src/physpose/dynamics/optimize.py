@@ -539,8 +539,11 @@ def foot_heights(model: mujoco.MjModel, qpos: np.ndarray, foot_geoms: dict[str, 
 
 def run_inputs(body: Body, kin: KinematicFit, obs: Observations) -> dict:
     """What a dynamics run depends on besides its config (for the checkpoint key)."""
-    return {"qpos": kin.qpos, "fps": kin.fps, "keypoints2d": obs.keypoints2d,
-            "camera_K": kin.camera_K, "T_world2cam": kin.T_world2cam, "body_xml": body.xml}
+    inputs = {"qpos": kin.qpos, "fps": kin.fps, "keypoints2d": obs.keypoints2d,
+              "camera_K": kin.camera_K, "T_world2cam": kin.T_world2cam, "body_xml": body.xml}
+    if body.scene.obstacles:  # since stop 25 the initial targets let the soles push on boxes
+        inputs["box_support"] = True
+    return inputs
 
 
 def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Observations,
