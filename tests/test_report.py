@@ -120,3 +120,13 @@ def test_frames_without_a_detection_are_marked_and_listed(tmp_path):
     assert row.startswith("4,") and "0.12-0.28 s" in row
     assert "frames without a detection" not in dict(summary_rows(make_reconstruction(12),
                                                                  tmp_path))
+
+
+def test_input_warnings_are_listed_in_the_summary(tmp_path):
+    rec = make_reconstruction(num_frames=12, meta={"diagnostics": {
+        "person_jumps": [5], "raised": [], "supports": [], "invalid_windows": [[2, 8]]}})
+    warnings = [v for k, v in summary_rows(rec, tmp_path) if k == "warning"]
+    assert len(warnings) == 2
+    assert "jumps further than a body moves" in warnings[0] and "--start/--end" in warnings[0]
+    assert "no simulated motion stayed valid" in warnings[1]
+    assert all(k != "warning" for k, _ in summary_rows(make_reconstruction(12), tmp_path))

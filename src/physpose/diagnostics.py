@@ -160,3 +160,11 @@ def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
     return (f"physics: no simulated motion stayed valid (within 1 m of the estimate, above the "
             f"floor) at frames {where}; the physics output there is the least bad fall, not "
             "a reconstruction. Use the kinematic motion there (joints_kinematic)")
+
+
+def warning_lines(found: dict, fps: float) -> list[str]:
+    """The warnings of a reconstruction's meta ``diagnostics`` (as the pipeline stores them)."""
+    lines = [jumps_message(found.get("person_jumps", []), fps),
+             raised_message([tuple(r) for r in found.get("raised", [])], fps),
+             invalid_message([tuple(r) for r in found.get("invalid_windows", [])], fps)]
+    return [line for line in lines if line]

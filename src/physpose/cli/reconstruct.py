@@ -283,12 +283,7 @@ def undetected_line(recon: Reconstruction) -> str | None:
 
 def diagnostics_lines(recon: Reconstruction) -> list[str]:
     """The warnings on the input that the pipeline found (physpose.diagnostics), if any."""
-    found = recon.meta.get("diagnostics", {})
-    lines = [diagnostics.jumps_message(found.get("person_jumps", []), recon.fps),
-             diagnostics.raised_message([tuple(r) for r in found.get("raised", [])], recon.fps),
-             diagnostics.invalid_message([tuple(r) for r in found.get("invalid_windows", [])],
-                                         recon.fps)]
-    return [line for line in lines if line]
+    return diagnostics.warning_lines(recon.meta.get("diagnostics", {}), recon.fps)
 
 
 def print_summary(recon: Reconstruction, out: Path, written: dict[str, Path],

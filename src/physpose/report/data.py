@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from physpose.diagnostics import warning_lines
 from physpose.reconstruction import Reconstruction
 from physpose.render.bodymotion import BodyMotion, GeomShape, reconstruction_motion
 from physpose.render.result import available_motions, joints_of
@@ -172,4 +173,5 @@ def summary_rows(rec: Reconstruction, folder: Path) -> list[tuple[str, str]]:
         rows.append(("physics restarts", "none: one continuous simulation" if not frames else
                      f"{len(frames)}, where the motion jumps back to the estimate: "
                      + ", ".join(f"{f / rec.fps:.2f} s" for f in frames)))
+    rows += [("warning", line) for line in warning_lines(rec.meta.get("diagnostics", {}), rec.fps)]
     return rows
