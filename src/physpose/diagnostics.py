@@ -35,12 +35,12 @@ def image_boxes(keypoints2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nda
     and whether the frame has at least 4 such landmarks (T,)."""
     conf = keypoints2d[..., 2] >= MIN_CONFIDENCE
     xy = keypoints2d[..., :2]
-    big = np.where(conf[..., None], xy, np.inf).min(axis=1)
-    small = np.where(conf[..., None], xy, -np.inf).max(axis=1)
+    lo = np.where(conf[..., None], xy, np.inf).min(axis=1)
+    hi = np.where(conf[..., None], xy, -np.inf).max(axis=1)
     ok = conf.sum(axis=1) >= 4
-    big[~ok], small[~ok] = 0.0, 0.0
-    centre = 0.5 * (big + small)
-    diagonal = np.linalg.norm(small - big, axis=-1)
+    lo[~ok], hi[~ok] = 0.0, 0.0
+    centre = 0.5 * (lo + hi)
+    diagonal = np.linalg.norm(hi - lo, axis=-1)
     return centre, diagonal, ok
 
 
