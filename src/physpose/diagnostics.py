@@ -30,18 +30,29 @@ RAISED_HEIGHT = 0.3        # m, lowest sole point above the floor ...
 RAISED_SECONDS = 1.0       # ... for at least this long (no jump keeps both feet up that long)
 
 
-def image_boxes(keypoints2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per frame: the centre (T, 2) and diagonal (T,) of the confident landmarks' image box,
-    and whether the frame has at least 4 such landmarks (T,)."""
+def image_box_corners(keypoints2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame: the low and high corners (T, 2) of the confident landmarks' image box (0
+    where too few), and whether the frame has at least 4 such landmarks (T,)."""
+    keypoints2d = np.asarray(keypoints2d, dtype=float)
     conf = keypoints2d[..., 2] >= MIN_CONFIDENCE
     xy = keypoints2d[..., :2]
     lo = np.where(conf[..., None], xy, np.inf).min(axis=1)
     hi = np.where(conf[..., None], xy, -np.inf).max(axis=1)
     ok = conf.sum(axis=1) >= 4
     lo[~ok], hi[~ok] = 0.0, 0.0
-    centre = 0.5 * (lo + hi)
-    diagonal = np.linalg.norm(hi - lo, axis=-1)
-    return centre, diagonal, ok
+    return lo, hi, ok
+
+
+def image_boxes(keypoints2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per frame: the centre (T, 2) and diagonal (T,) of the confident landmarks' image box,
+    and whether the frame has at least 4 such landmarks (T,)."""
+    lo, hi, ok = image_box_corners(keypoints2d)
+    return 0.5 * (lo + hi), np.linalg.norm(hi - lo, axis=-1), ok
+
+
+def size_ratio(a: float, b: float) -> float:
+    """How many times larger the larger of two box diagonals is (>= 1)."""
+    return max(a, b) / max(min(a, b), 1e-9)
 
 
 def person_jumps(keypoints2d: np.ndarray, detected: np.ndarray, fps: float) -> list[int]:
@@ -51,14 +62,14 @@ def person_jumps(keypoints2d: np.ndarray, detected: np.ndarray, fps: float) -> l
 
     Interpolated frames are skipped (they bridge a gap; the jump shows between the two real
     detections around it)."""
-    centre, diagonal, ok = image_boxes(np.asarray(keypoints2d, dtype=float))
+    centre, diagonal, ok = image_boxes(keypoints2d)
     frames = np.flatnonzero(np.asarray(detected, dtype=bool) & ok)
     jumps = []
     for a, b in zip(frames[:-1], frames[1:]):
         size = 0.5 * (diagonal[a] + diagonal[b])
         moved = np.linalg.norm(centre[b] - centre[a])
-        ratio = max(diagonal[a], diagonal[b]) / max(min(diagonal[a], diagonal[b]), 1e-9)
-        if moved > size * (JUMP_SIZES + JUMP_SPEED * (b - a) / fps) or ratio > 2.0:
+        if moved > size * (JUMP_SIZES + JUMP_SPEED * (b - a) / fps) \
+                or size_ratio(diagonal[a], diagonal[b]) > 2.0:
             jumps.append(int(b))
     return jumps
 

@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from physpose.diagnostics import JUMP_SIZES, image_boxes, person_jumps
+from physpose.diagnostics import (JUMP_SIZES, image_box_corners, image_boxes,
+                                  person_jumps, size_ratio)
 
 LINK_SPEED = 2.0   # box diagonals per second a subject's image box may move while unseen
 LINK_SIZE = 1.5    # at most this ratio between the box sizes of two tracks of one subject
@@ -26,7 +27,7 @@ def subject_tracks(keypoints2d: np.ndarray, detected: np.ndarray, fps: float
                    ) -> tuple[list[np.ndarray], np.ndarray]:
     """The detections split at person jumps: (tracks, subject), tracks a list of frame-index
     arrays in time order and subject a bool array (one per track)."""
-    centre, diagonal, ok = image_boxes(np.asarray(keypoints2d, dtype=float))
+    centre, diagonal, ok = image_boxes(keypoints2d)
     frames = np.flatnonzero(np.asarray(detected, dtype=bool) & ok)
     if not len(frames):
         return [], np.zeros(0, bool)
@@ -38,10 +39,10 @@ def subject_tracks(keypoints2d: np.ndarray, detected: np.ndarray, fps: float
 
     def continues(a: int, b: int) -> bool:
         """Track b is where the subject, last seen at frame a, can be at frame b."""
-        ratio = max(diagonal[a], diagonal[b]) / max(min(diagonal[a], diagonal[b]), 1e-9)
         size = 0.5 * (diagonal[a] + diagonal[b])
         reach = size * (JUMP_SIZES + LINK_SPEED * abs(b - a) / fps)
-        return ratio <= LINK_SIZE and np.linalg.norm(centre[b] - centre[a]) <= reach
+        return size_ratio(diagonal[a], diagonal[b]) <= LINK_SIZE \
+            and np.linalg.norm(centre[b] - centre[a]) <= reach
 
     last = tracks[main][-1]
     for k in range(main + 1, len(tracks)):
@@ -69,10 +70,8 @@ def subject_regions(keypoints2d: np.ndarray, detected: np.ndarray, fps: float,
         else np.zeros(0, int)
     if not len(seen):
         return np.tile(full, (t, 1))
-    conf = keypoints2d[..., 2] >= 0.3
-    xy = keypoints2d[..., :2]
-    lo = np.where(conf[..., None], xy, np.inf).min(axis=1)[seen]
-    hi = np.where(conf[..., None], xy, -np.inf).max(axis=1)[seen]
+    lo, hi, _ = image_box_corners(keypoints2d)
+    lo, hi = lo[seen], hi[seen]   # every subject frame has a box (its tracks are made of them)
     frames = np.arange(t)
     lo_all = np.stack([np.interp(frames, seen, lo[:, i]) for i in range(2)], axis=1)
     hi_all = np.stack([np.interp(frames, seen, hi[:, i]) for i in range(2)], axis=1)
