@@ -151,15 +151,18 @@ def jumps_message(frames: list[int], fps: float) -> str | None:
             "video to that person")
 
 
-def raised_message(runs: list[tuple[int, int, float]], fps: float) -> str | None:
-    """A warning on `raised_runs`, or None."""
+def raised_message(runs: list[tuple[int, int, float]], fps: float, supported: bool = True
+                   ) -> str | None:
+    """A warning on `raised_runs`, or None; `supported`: whether a support box was added."""
     if not runs:
         return None
     where = ", ".join(f"{_span(a, b, fps)}, {h:.2f} m up" for a, b, h in runs)
+    what = ("physpose puts a box under the feet there (--no-auto-support: none, and the "
+            "simulated body falls)" if supported else
+            "no support was added (--no-auto-support), so the simulated body falls there")
     return (f"kinematics: both feet stay above the floor for longer than a jump lasts at frames "
             f"{where}: the person stands on something the scene does not have, or the floor "
-            "was misjudged. physpose puts a box under the feet there (--no-auto-support: "
-            "none, and the simulated body falls); give the real support with --obstacle "
+            f"was misjudged. {what}; give the real support with --obstacle "
             "box:x,y,z,sx,sy,sz (centre and sizes in world metres, docs/body_model.md)")
 
 
@@ -176,6 +179,7 @@ def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
 def warning_lines(found: dict, fps: float) -> list[str]:
     """The warnings of a reconstruction's meta ``diagnostics`` (as the pipeline stores them)."""
     lines = [jumps_message(found.get("person_jumps", []), fps),
-             raised_message([tuple(r) for r in found.get("raised", [])], fps),
+             raised_message([tuple(r) for r in found.get("raised", [])], fps,
+                            supported=bool(found.get("supports"))),
              invalid_message([tuple(r) for r in found.get("invalid_windows", [])], fps)]
     return [line for line in lines if line]

@@ -117,9 +117,9 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                          **({"log": stderr_log} if progress else {}))
     lap("kinematics")
     raised = diagnostics.raised_runs(kin.joints, kin.fps)
-    _warn(diagnostics.raised_message(raised, kin.fps))
-    scene = config.scene
     supports = diagnostics.support_boxes(kin.joints, raised, kin.fps) if config.auto_support else ()
+    _warn(diagnostics.raised_message(raised, kin.fps, supported=bool(supports)))
+    scene = config.scene
     if supports:
         scene = dataclasses.replace(scene, obstacles=scene.obstacles + supports)
     body = build_body(kin.shape, scene, config.body)
