@@ -42,6 +42,19 @@ def test_reconstruct_cli_refuses_a_file_as_output_folder(tmp_path, capsys):
     assert code == 2 and "not a folder" in capsys.readouterr().err
 
 
+def test_reconstruct_cli_refuses_a_clip_of_one_frame(tmp_path, capsys):
+    body = build_body(BodyShape.from_height(1.75))
+    _, obs, _ = simulated_clip(body, "stand", seconds=0.4)
+    one = obs.replace(**{name: getattr(obs, name)[:1] for name in
+                         ("timestamps", "keypoints2d", "detected", "interpolated",
+                          "world_landmarks", "masks", "frame_indices")
+                         if getattr(obs, name) is not None})
+    keypoints = one.save(tmp_path / "one.npz")
+    code = main(["reconstruct", str(keypoints), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and "only 1 frame" in err and "one.npz" in err and "Traceback" not in err
+
+
 @pytest.mark.slow
 def test_reconstruct_writes_the_contract(tmp_path):
     body = build_body(BodyShape.from_height(1.75))

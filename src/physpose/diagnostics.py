@@ -98,6 +98,8 @@ def support_boxes(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: f
     on it, not in it), its sides SUPPORT_MARGIN beyond where the resting soles are. The
     estimate says that something holds the person up there; this is the simplest such thing.
     A stretch without resting frames gets none."""
+    if not runs:
+        return ()
     soles = foot_points(np.asarray(joints, dtype=float))       # (T, 2, P, 3)
     centres = soles.mean(axis=2)                                 # (T, 2, 3)
     speed = np.linalg.norm(np.gradient(centres, axis=0), axis=-1) * fps

@@ -22,6 +22,7 @@ from physpose.body import BodyConfig, build_body
 from physpose.cache import atomic_path
 from physpose.dynamics import PRESETS as DYNAMICS_PRESETS
 from physpose.dynamics import DynamicsConfig, optimize_dynamics
+from physpose.dynamics.optimize import MIN_FRAMES
 from physpose.errors import PhysposeError
 from physpose.kinematics.config import KinematicConfig
 from physpose.keypoints_io import is_keypoints_file, load_keypoints
@@ -110,6 +111,10 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
         clock = now
 
     obs = load_observations(video_or_observations, config.observe, progress)
+    if obs.num_frames < MIN_FRAMES:
+        raise PhysposeError(f"only {obs.num_frames} frame{'s' * (obs.num_frames != 1)} to "
+                            f"reconstruct motion from (need at least {MIN_FRAMES})",
+                            path=obs.source, remedy="use a longer clip, or a wider --start/--end")
     lap("observe")
     jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
     _warn(diagnostics.jumps_message(jumps, obs.fps))
