@@ -50,6 +50,7 @@ def _args(*argv: str):
     (["--weight", "15"], "names no objective term"),
     (["--weight", "pose"], "'pose' has no value"),
     (["--fps", "1000"], "outside"),
+    (["--person", "5000,10"], "--person 5000,10 is outside the"),
     (["--camera", "{missing}.json"], "camera file not found"),
     (["--camera", "{bad_json}"], "cannot read camera intrinsics"),
     (["--camera", "{good_json}", "--camera-name", "cam01"], "applies to a Qualisys"),
@@ -82,6 +83,8 @@ def test_time_range_on_keypoints_is_refused(tmp_path, capsys):
     keys.write_bytes(b"")
     assert main(["reconstruct", str(keys), "--out", str(tmp_path / "o"), "--end", "1"]) == 2
     assert "apply to videos" in capsys.readouterr().err
+    assert main(["reconstruct", str(keys), "--out", str(tmp_path / "o"), "--person", "1,2"]) == 2
+    assert "apply to videos" in capsys.readouterr().err
 
 
 def test_flags_make_the_pipeline_config():
@@ -91,6 +94,8 @@ def test_flags_make_the_pipeline_config():
                                 "box:-0.35,0,0.225,0.45,0.45,0.45,30", "--obstacle",
                                 "box:1,1,0.1,0.4,0.4,0.2"))
     assert (cfg.observe.target_fps, cfg.observe.start, cfg.observe.end) == (20, 0.5, 2)
+    assert pipeline_config(_args("v.mp4", "--out", "o", "--person", "12.5,40")
+                           ).observe.person == (12.5, 40.0)
     assert cfg.dynamics.iterations == 2000
     assert cfg.scene.ground_friction == 0.5
     assert cfg.scene.ground_stiffness_damping() == pytest.approx((150.0, 1.5))
@@ -248,6 +253,12 @@ def test_unknown_export_format_is_a_usage_error(tmp_path, capsys):
     with pytest.raises(SystemExit) as done:
         main(["export", str(tmp_path), "-f", "fbx"])
     assert done.value.code == 2 and "invalid choice: 'fbx'" in capsys.readouterr().err
+
+
+def test_a_person_that_is_not_a_point_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["reconstruct", "v.mp4", "--out", str(tmp_path), "--person", "left"])
+    assert done.value.code == 2 and "'left' is not X,Y in pixels" in capsys.readouterr().err
 
 
 def test_demo_still_writes_the_kinematic_outputs_when_dynamics_fails(tmp_path, monkeypatch,

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 import numpy as np
 import pytest
@@ -237,3 +239,21 @@ def test_the_subject_is_followed_when_the_tracker_jumps_to_another_person(sports
     last = np.flatnonzero(obs.detected)[-5:]
     assert obs.keypoints2d[last][:, [LM["left_hip"], LM["right_hip"]], 0].mean() \
         > 0.6 * obs.image_size[0]
+
+
+@pytest.mark.slow
+def test_a_person_named_by_a_point_is_followed_instead_of_the_one_physpose_picks(sports2d_demo):
+    """Sports2D's demo from 2.7 s: physpose would follow the man on the box; a point on the
+    woman walking past on the right follows her leftwards across the lawn."""
+    cfg = ObserveConfig(start=2.7, end=5.0, person=(1224.0, 720.0), use_cache=False)
+    obs = observe(sports2d_demo, cfg, progress=False)
+    assert person_jumps(obs.keypoints2d, obs.detected, obs.fps) == []
+    hips = obs.keypoints2d[:, [LM["left_hip"], LM["right_hip"]], :2].mean(axis=1)
+    seen = np.flatnonzero(obs.detected)
+    assert len(seen) > 0.9 * obs.num_frames
+    assert hips[seen[0], 0] > 0.6 * obs.image_size[0] and hips[seen[0], 1] > 0.5 * obs.image_size[1]
+    assert hips[seen[-1], 0] < hips[seen[0], 0] - 500      # she walks left
+    with pytest.raises(PhysposeError, match="no person found at --person 300,80"):
+        observe(sports2d_demo, dataclasses.replace(cfg, person=(300.0, 80.0)), progress=False)
+    with pytest.raises(PhysposeError, match="outside the 1768x994 image"):
+        observe(sports2d_demo, dataclasses.replace(cfg, person=(2000.0, 80.0)), progress=False)

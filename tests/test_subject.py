@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from physpose.subject import mask_outside, subject_regions, subject_tracks
+from physpose.subject import (Follower, covers, mask_outside, seed_regions, subject_regions,
+                              subject_tracks)
 
 FPS = 25.0
 
@@ -60,3 +61,26 @@ def test_mask_outside_blacks_out_everything_but_the_box():
     out = mask_outside(image, np.array([10.2, 5.0, 30.0, 20.7]))
     assert out[5:21, 10:30].min() == 200 and out.sum() == 200 * 3 * 16 * 20
     assert mask_outside(image, np.array([0.0, 0.0, 60.0, 40.0])).min() == 200
+
+
+def test_a_named_person_is_found_by_a_point_on_them_and_followed():
+    walker = _person(np.arange(40), 900.0, 150.0, 300.0)
+    assert covers(walker[0], (900.0, 500.0)) and not covers(walker[0], (300.0, 500.0))
+    # The boxes tried around the point: the whole image, then smaller squares on the point.
+    boxes = seed_regions((900.0, 500.0), (1920, 1080))
+    assert boxes[0].tolist() == [0, 0, 1920, 1080]
+    sides = [b[2] - b[0] for b in boxes[1:]]
+    assert sides == sorted(sides, reverse=True)
+    assert all(b[0] <= 900 <= b[2] and b[1] <= 500 <= b[3] for b in boxes)
+    # Following: each frame's region holds the walker's next detection, not a person
+    # standing 600 px to the left; while unseen the region widens.
+    follow = Follower(walker[0], FPS, (1920, 1080))
+    for t in range(1, 40):
+        x0, y0, x1, y1 = follow.region()
+        centre = walker[t, :, :2].mean(axis=0)
+        assert x0 <= centre[0] <= x1 and y0 <= centre[1] <= y1 and x0 > 300 + 150 * t / FPS
+        follow.update(walker[t] if t < 30 else None)
+    width = lambda b: b[2] - b[0]  # noqa: E731
+    before = width(follow.region())
+    follow.update(None)
+    assert width(follow.region()) > before

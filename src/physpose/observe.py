@@ -14,7 +14,10 @@ MediaPipe's tracker follows one person and, when it loses that person, takes whi
 its detector finds next. When the detections jump like that (`diagnostics.person_jumps`), the
 video is looked at a second time with every frame masked to where the subject can be (the
 longest track and the tracks continuing it; subject.py), and that result is kept if it jumps
-less. Videos whose detections do not jump are looked at once.
+less. Videos whose detections do not jump are looked at once. A user who wants another person
+than the one physpose would pick names them by a point on them in the first analysed frame
+(`person`, `--person X,Y`): the detector then only ever sees the image around that person's
+last detection (subject.Follower), and the automatic second look is skipped.
 
 Frames without a detection are flagged; gaps of at most `max_gap_frames` between two detected
 frames are filled by linear interpolation (positions, confidences, world landmarks and masks)
@@ -40,7 +43,7 @@ from physpose.diagnostics import person_jumps
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
 from physpose.observations import Observations
-from physpose.subject import mask_outside, subject_regions
+from physpose.subject import Follower, covers, mask_outside, seed_regions, subject_regions
 
 OBSERVE_VERSION = 2  # bump when a change alters what observe() returns for the same input
 _log = logging.getLogger(__name__)
@@ -59,6 +62,8 @@ class ObserveConfig:
     min_detection_fraction: float = 0.5    # fail if the person is found in fewer frames than this
     start: float | None = None             # s, first time analysed (None: start of the video)
     end: float | None = None               # s, analysis stops before this (None: end of video)
+    person: tuple[float, float] | None = None  # px (x, y): a point on the person to follow in
+                                           # the first analysed frame (None: physpose picks)
     use_cache: bool = True                 # reuse a cached result for the same input and settings
 
     def __post_init__(self) -> None:
@@ -73,6 +78,9 @@ class ObserveConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and 0 <= value <= 1):
                 bad(f"{name}={value} is outside [0, 1]", f"set {name} between 0 and 1")
+        if self.person is not None and (len(self.person) != 2
+                                        or not all(math.isfinite(v) for v in self.person)):
+            bad(f"person={self.person} is not an image point", "give x,y in pixels")
         if self.mask_long_side < 0 or self.max_gap_frames < 0:
             bad("mask_long_side and max_gap_frames must be >= 0", "use non-negative integers")
 
@@ -93,12 +101,13 @@ class PoseDetector:
     stamps only drive landmark smoothing).
     """
 
-    def __init__(self, cfg: ObserveConfig):
+    def __init__(self, cfg: ObserveConfig, static: bool = False):
+        """static: every frame on its own (no tracking, no smoothing), for single images."""
         import mediapipe as mp  # imported here: loading it costs ~1 s
 
         self.mask_long_side = cfg.mask_long_side
         self._pose = mp.solutions.pose.Pose(
-            static_image_mode=False, model_complexity=cfg.model_complexity,
+            static_image_mode=static, model_complexity=cfg.model_complexity,
             smooth_landmarks=True, enable_segmentation=cfg.mask_long_side > 0,
             smooth_segmentation=True, min_detection_confidence=cfg.min_detection_confidence,
             min_tracking_confidence=cfg.min_tracking_confidence)
@@ -185,7 +194,7 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
         return _from_arrays(hit, source=str(video))
     obs = _detect_all(info, plan, cfg, progress)
     jumps = person_jumps(obs.keypoints2d, obs.detected, obs.fps)
-    if jumps:
+    if jumps and cfg.person is None:
         # The tracker lost its person and took another: look again, with every frame masked
         # to where the subject (the longest track and those continuing it) can be.
         _log.warning("%s: the detected person jumps at frames %s; looking again for one "
@@ -212,6 +221,8 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
     mh, mw = mask_shape(info.image_size, cfg.mask_long_side)
     masks = np.zeros((t, mh, mw), np.uint8) if cfg.mask_long_side > 0 else None
     detected = np.zeros(t, bool)
+    follower = _follower(info, plan, cfg) if regions is None and cfg.person is not None \
+        else None
     read = 0
     bar = tqdm(total=t, unit="frame", desc=f"observe {info.path.name}", disable=not progress,
                leave=False)
@@ -221,7 +232,11 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
             bar.update()
             if regions is not None:
                 image = mask_outside(image, regions[i])
+            elif follower is not None:
+                image = mask_outside(image, follower.region())
             found = detector.detect(image)
+            if follower is not None:
+                follower.update(None if found is None else found.keypoints2d)
             if found is None:
                 continue
             detected[i] = True
@@ -242,6 +257,33 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
         timestamps=plan.timestamps[:read].astype(np.float64), keypoints2d=kp, detected=detected,
         interpolated=interpolated, world_landmarks=world, masks=masks,
         frame_indices=plan.indices[:read].astype(np.int64))
+
+
+def _follower(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig
+              ) -> Follower:
+    """Find the person at `cfg.person` in the first planned frame (the whole image first, then
+    smaller and smaller boxes around the point) and follow them from there."""
+    x, y = cfg.person
+    width, height = info.image_size
+    first = f"the first analysed frame ({plan.timestamps[0]:.2f} s)"
+    if not (0 <= x < width and 0 <= y < height):
+        raise PhysposeError(f"--person {x:g},{y:g} is outside the {width}x{height} image",
+                            path=info.path, remedy="give a pixel on the person in "
+                            f"{first}, origin at the top left")
+    frames = videolib.read_frames(info, plan.indices[:1])
+    try:
+        _, image = next(frames)
+    finally:
+        frames.close()
+    with PoseDetector(cfg, static=True) as detector:
+        for region in seed_regions((x, y), info.image_size):
+            found = detector.detect(mask_outside(image, region))
+            if found is not None and covers(found.keypoints2d, (x, y)):
+                return Follower(found.keypoints2d, plan.fps, info.image_size)
+    raise PhysposeError(f"no person found at --person {x:g},{y:g} in {first}",
+                        path=info.path, frame=int(plan.indices[0]),
+                        remedy="give a pixel on the person's body there (origin at the top "
+                               "left), or a --start at which the whole person is in view")
 
 
 def _check_detection_rate(path: Path, found: int, total: int, cfg: ObserveConfig) -> None:

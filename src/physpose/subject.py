@@ -9,6 +9,11 @@ and a place it can have reached at LINK_SPEED). `subject_regions` gives, per fra
 box the subject can be in: around its own detection, or between its detections before and
 after, widening with the time since it was seen. observe.py runs the detector a second time on
 frames masked to those boxes, so another person is not in view.
+
+A user can also name the person (`ObserveConfig.person`, `--person X,Y`): a point on them in
+the first analysed frame. `seed_regions` are the image boxes tried there, `covers` tells whether
+a detection is the person at that point, and `Follower` gives each next frame's box around the
+person's last detection, so the detector only ever sees that person.
 """
 
 from __future__ import annotations
@@ -95,3 +100,63 @@ def mask_outside(image: np.ndarray, box: np.ndarray) -> np.ndarray:
     out[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)] = \
         image[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)]
     return out
+
+
+SEED_HALF_SIZES = (0.5, 0.3, 0.18)   # half-sides of the boxes tried around a --person point,
+                                      # in image heights (after the whole image)
+COVER_MARGIN = 0.15                   # a detection covers a point within this many diagonals
+
+
+def seed_regions(point: tuple[float, float], image_size: tuple[int, int]) -> list[np.ndarray]:
+    """The image boxes [x0, y0, x1, y1] tried in the first frame to find the person at a point:
+    the whole image, then squares centred on the point, smaller and smaller, so that a more
+    prominent person elsewhere ends up outside the box."""
+    width, height = image_size
+    x, y = point
+    boxes = [np.array([0.0, 0.0, float(width), float(height)])]
+    for half in SEED_HALF_SIZES:
+        h = half * height
+        boxes.append(np.clip([x - h, y - h, x + h, y + h], 0.0, [width, height, width, height]))
+    return boxes
+
+
+def covers(keypoints2d: np.ndarray, point: tuple[float, float]) -> bool:
+    """Whether one detection's (33, 3) confident landmarks' box, grown by COVER_MARGIN of its
+    diagonal, contains the point."""
+    lo, hi, ok = image_box_corners(np.asarray(keypoints2d, dtype=float)[None])
+    if not ok[0]:
+        return False
+    grow = COVER_MARGIN * np.linalg.norm(hi[0] - lo[0])
+    p = np.asarray(point, dtype=float)
+    return bool(np.all(p >= lo[0] - grow) and np.all(p <= hi[0] + grow))
+
+
+class Follower:
+    """Where one person can be in the next frame: around their last detection's image box,
+    grown by MARGIN diagonals, and by LINK_SPEED diagonals per second while they are unseen."""
+
+    def __init__(self, keypoints2d: np.ndarray, fps: float, image_size: tuple[int, int]):
+        self.fps = fps
+        self.full = np.array([0.0, 0.0, float(image_size[0]), float(image_size[1])])
+        self.unseen = 0
+        self._box = self._box_of(keypoints2d)
+
+    @staticmethod
+    def _box_of(keypoints2d: np.ndarray) -> np.ndarray | None:
+        lo, hi, ok = image_box_corners(np.asarray(keypoints2d, dtype=float)[None])
+        return np.concatenate([lo[0], hi[0]]) if ok[0] else None
+
+    def region(self) -> np.ndarray:
+        """The box [x0, y0, x1, y1] (pixels, clipped to the image) to look in next."""
+        lo, hi = self._box[:2], self._box[2:]
+        grow = np.linalg.norm(hi - lo) * (MARGIN + LINK_SPEED * self.unseen / self.fps)
+        return np.clip(np.concatenate([lo - grow, hi + grow]), self.full[[0, 1, 0, 1]],
+                       self.full[[2, 3, 2, 3]])
+
+    def update(self, keypoints2d: np.ndarray | None) -> None:
+        """Take this frame's detection in the region (None: not found)."""
+        box = None if keypoints2d is None else self._box_of(keypoints2d)
+        if box is None:
+            self.unseen += 1
+        else:
+            self._box, self.unseen = box, 0

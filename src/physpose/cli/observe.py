@@ -51,7 +51,7 @@ def run_observe(source: str | Path, out_dir: str | Path, cfg: ObserveConfig = Ob
     source, out_dir = Path(source), Path(out_dir)
     keypoints = is_keypoints_file(source)
     if keypoints and cfg != dataclasses.replace(ObserveConfig(), use_cache=cfg.use_cache):
-        raise PhysposeError("--fps/--start/--end apply to videos, not to precomputed keypoints",
+        raise PhysposeError("--fps/--start/--end/--person apply to videos, not to precomputed keypoints",
                             path=source, remedy="drop those options, or resample the keypoints "
                                                 "before writing them")
     obs = load_keypoints(source) if keypoints else observe(source, cfg, progress=progress)
@@ -82,10 +82,25 @@ def run_observe(source: str | Path, out_dir: str | Path, cfg: ObserveConfig = Ob
     return ObserveRun(observations=obs, files=files, seconds=time.perf_counter() - start)
 
 
+PERSON_HELP = ("follow the person at this pixel (x,y, origin top left) of the first analysed "
+               "frame, e.g. 1210,600, instead of the one physpose picks (the one the detector "
+               "finds most); for videos with several people")
+
+
+def image_point(text: str) -> tuple[float, float]:
+    """argparse type of --person: 'X,Y' in pixels."""
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not X,Y in pixels, e.g. 640,360") from None
+    return x, y
+
+
 def config_from_args(args: argparse.Namespace) -> ObserveConfig:
-    """ObserveConfig from the shared --fps/--start/--end/--no-cache options."""
+    """ObserveConfig from the shared --fps/--start/--end/--person/--no-cache options."""
     return ObserveConfig(target_fps=ObserveConfig.target_fps if args.fps is None else args.fps,
-                         start=args.start, end=args.end, use_cache=not args.no_cache)
+                         start=args.start, end=args.end, person=args.person,
+                         use_cache=not args.no_cache)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -103,6 +118,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "never above the video's own)")
     p.add_argument("--start", type=float, default=None, metavar="S", help="start time, s")
     p.add_argument("--end", type=float, default=None, metavar="E", help="end time, s")
+    p.add_argument("--person", type=image_point, default=None, metavar="X,Y", help=PERSON_HELP)
     p.add_argument("--no-cache", action="store_true", help="recompute even if cached")
     p.add_argument("--no-overlay", action="store_true", help="skip the overlay video")
     p.set_defaults(func=_run)

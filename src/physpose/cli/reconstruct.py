@@ -14,6 +14,7 @@ import numpy as np
 from physpose import diagnostics
 from physpose.dynamics import PRESETS
 from physpose.dynamics.objective import TERMS, ObjectiveWeights
+from physpose.cli.observe import PERSON_HELP, image_point
 from physpose.errors import PhysposeError
 from physpose.export import FORMATS
 from physpose.keypoints_io import is_keypoints_file
@@ -84,6 +85,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--start", type=float, metavar="S", help="first second analysed (default 0)")
     g.add_argument("--end", type=float, metavar="S",
                    help="analysis stops before this second (default: end of the video)")
+    g.add_argument("--person", type=image_point, metavar="X,Y", help=PERSON_HELP)
     g.add_argument("--camera", type=Path, metavar="FILE",
                    help="camera calibration: a Qualisys .qca.txt, or a JSON file "
                         '{"K": [[fx,0,cx],[0,fy,cy],[0,0,1]]} (default: intrinsics estimated)')
@@ -167,7 +169,7 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     observe = config.observe
     if args.fps is not None:
         observe = dataclasses.replace(observe, target_fps=args.fps)
-    observe = dataclasses.replace(observe, start=args.start, end=args.end)
+    observe = dataclasses.replace(observe, start=args.start, end=args.end, person=args.person)
     dynamics = config.dynamics
     if args.candidates is not None:
         dynamics = dataclasses.replace(dynamics, candidates=args.candidates)
@@ -194,8 +196,8 @@ def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:
         if not video.is_file():
             raise PhysposeError("keypoints file not found", path=video, remedy="check the path")
         o = config.observe
-        if (o.start, o.end) != (None, None):
-            raise PhysposeError("--start/--end apply to videos, not to precomputed keypoints",
+        if (o.start, o.end, o.person) != (None, None, None):
+            raise PhysposeError("--start/--end/--person apply to videos, not to precomputed keypoints",
                                 path=video, remedy="drop them, or cut the keypoints file")
         return None
     info = videolib.probe(video)
