@@ -113,11 +113,11 @@ Frame Time: 0.1
         for line in text.splitlines():
             if line.strip().startswith("OFFSET"):
                 vals = [float(v) / unit for v in line.split()[1:]]
-                line = line[:line.index("OFFSET")] + "OFFSET " + " ".join(f"{v:g}" for v in vals)
+                line = line[:line.index("OFFSET")] + "OFFSET " + " ".join(f"{v:.12g}" for v in vals)
             lines.append(line)
         text = "\n".join(lines) + "\n"
         rows = [[v / unit if k < 3 else v for k, v in enumerate(r)] for r in rows]
-    text += "\n".join(" ".join(f"{v:g}" for v in r) for r in rows) + "\n"
+    text += "\n".join(" ".join(f"{v:.12g}" for v in r) for r in rows) + "\n"
     path.write_text(text)
     return path
 
@@ -169,10 +169,18 @@ def test_bvh_clip_is_z_up_on_the_floor_at_the_target_rate(tmp_path):
         assert np.ptp(lengths) < 1e-9
 
 
-def test_bvh_length_unit_is_guessed(tmp_path):
+@pytest.mark.parametrize("unit", [0.01, 0.001, 0.0254, 0.0254 / 0.45])
+def test_bvh_length_unit_is_guessed(tmp_path, unit):
+    """Centimetres, millimetres, inches and CMU's units (1/0.45 inch, the cgspeed BVH
+    conversion's) all read as the same person in metres."""
     metres = load_mocap(write_bvh(tmp_path / "m.bvh", bvh_rows()))
-    centimetres = load_mocap(write_bvh(tmp_path / "cm.bvh", bvh_rows(), unit=0.01))
-    assert centimetres.joints == pytest.approx(metres.joints, abs=1e-9)
+    other = load_mocap(write_bvh(tmp_path / "other.bvh", bvh_rows(), unit=unit))
+    assert other.joints == pytest.approx(metres.joints, abs=1e-9)
+
+
+def test_bvh_of_no_plausible_size_is_refused(tmp_path):
+    with pytest.raises(PhysposeError, match="cannot tell the length unit.*rescale the file"):
+        load_mocap(write_bvh(tmp_path / "tiny.bvh", bvh_rows(), unit=1000.0))
 
 
 def test_bvh_errors_name_file_and_line(tmp_path):
@@ -407,6 +415,26 @@ REAL_CLIPS = {  # file -> (frames at the source rate, source rate, height range 
         ("cartwheel", 164, 60.0), ("dance_a", 98, 60.0), ("kick", 47, 30.0),
         ("punch", 65, 30.0), ("roll", 121, 60.0))},
 }
+
+
+def test_real_cmu_bvh_in_cmu_units(shared_data, tmp_path):
+    """The cgspeed conversion of the CMU database writes BVH in CMU's units (1/0.45 inch);
+    scaled_131_01.bvh is that file in metres. Written back in CMU units it reads the same."""
+    unit = 0.0254 / 0.45
+    text = (shared_data / "mocap" / "cmu_bvh" / "scaled_131_01.bvh").read_text().splitlines()
+    start = text.index("MOTION") + 3
+    out = []
+    for k, line in enumerate(text):
+        words = line.split()
+        if words[:1] == ["OFFSET"]:
+            line = "OFFSET " + " ".join(f"{float(v) / unit:.9g}" for v in words[1:])
+        elif k >= start and words:
+            line = " ".join([f"{float(v) / unit:.9g}" for v in words[:3]] + words[3:])
+        out.append(line)
+    (tmp_path / "131_01.bvh").write_text("\n".join(out) + "\n")
+    metres = load_mocap(shared_data / "mocap" / "cmu_bvh" / "scaled_131_01.bvh")
+    cmu = load_mocap(tmp_path / "131_01.bvh")
+    assert cmu.joints == pytest.approx(metres.joints, abs=1e-5)
 
 
 @pytest.mark.parametrize("rel", sorted(REAL_CLIPS))

@@ -174,16 +174,29 @@ def bvh_forward_kinematics(bvh: BvhFile, scale: float = 1.0) -> tuple[np.ndarray
     return pos * scale, rot
 
 
-# File units -> metres by the rest-pose ankles-to-head extent in file units.
-_UNIT_GUESSES = ((0.5, 2.5, 1.0), (50.0, 250.0, 0.01), (500.0, 2500.0, 0.001))
+# Length units a BVH file may be written in (metres per unit): metres, centimetres,
+# millimetres, inches, and CMU's (its ASF "length 0.45": 1/0.45 inch, kept by the widely used
+# cgspeed BVH conversion of the CMU database, whose people span about 30 units).
+LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "cmu": 0.0254 / 0.45}
+REST_EXTENT = (0.7, 2.3)    # m, plausible largest rest-pose extent of a person (height or span)
+TYPICAL_EXTENT = 1.6        # m, an adult's
+
+
+def guess_length_unit(extent: float) -> float | None:
+    """Metres per file unit for a skeleton whose rest pose spans `extent` file units: of the
+    LENGTH_UNITS that make it a plausible person, the one nearest a typical adult (None if
+    none does)."""
+    lo, hi = REST_EXTENT
+    fits = [s for s in LENGTH_UNITS.values() if lo <= extent * s <= hi]
+    return min(fits, key=lambda s: abs(np.log(extent * s / TYPICAL_EXTENT)), default=None)
 
 
 def load_bvh(path: str | Path, target_fps: float | None = 25.0,
              scale: float | None = None) -> MocapClip:
     """Read a BVH clip into the project's world frame (see `physpose.mocap.common`).
 
-    scale: metres per file unit; None guesses metres, centimetres or millimetres from the
-    rest-pose size of the skeleton.
+    scale: metres per file unit; None guesses it from the rest-pose size of the skeleton
+    (`guess_length_unit`: metres, centimetres, millimetres, inches or CMU's units).
     """
     path = Path(path)
     bvh = parse_bvh(path)
@@ -193,11 +206,13 @@ def load_bvh(path: str | Path, target_fps: float | None = 25.0,
     rest_pos = bvh_forward_kinematics(rest)[0][0]
     if scale is None:
         extent = float(np.ptp(rest_pos, axis=0).max())
-        guesses = [s for lo, hi, s in _UNIT_GUESSES if lo <= extent <= hi]
-        if not guesses:
-            raise PhysposeError(f"cannot tell the length unit (skeleton spans {extent:g} units)",
-                                path=path, remedy="pass scale= (metres per file unit)")
-        scale = guesses[0]
+        scale = guess_length_unit(extent)
+        if scale is None:
+            raise PhysposeError(f"cannot tell the length unit (the skeleton's rest pose spans "
+                                f"{extent:g} units, a person in none of "
+                                f"{', '.join(LENGTH_UNITS)})", path=path,
+                                remedy="rescale the file to metres or centimetres (from Python: "
+                                       "load_bvh(path, scale=metres per file unit))")
     pos, rot = bvh_forward_kinematics(bvh, scale)
     times = np.arange(len(bvh.motion)) * bvh.frame_time
     motion = motion_from_tree(path.stem, str(path), times, names, parents, pos, rot,
