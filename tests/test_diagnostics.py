@@ -1,5 +1,5 @@
-"""Warnings on the input: the detector switching people, a person standing above the modelled
-floor, dynamics windows without a valid sample."""
+"""Warnings on the input: the detector switching people, feet out of the picture, a person
+standing above the modelled floor, dynamics windows without a valid sample."""
 
 from __future__ import annotations
 
@@ -101,3 +101,20 @@ def test_invalid_windows_are_merged_and_every_warning_names_frames_and_a_remedy(
     recon.meta["diagnostics"]["supports"] = [[0.0, 0.0, 0.9, 1.5, 1.9, 1.8]]
     assert "puts a box" in diagnostics_lines(recon)[1]
     assert diagnostics_lines(SimpleNamespace(fps=25.0, meta={})) == []
+
+
+def test_feet_out_of_the_picture_or_unseen_are_counted_and_warned_about():
+    kp = _walker(40, 25.0)                     # feet in the image, seen
+    valid = np.ones(40, bool)
+    feet = diagnostics.FOOT_LANDMARKS
+    assert diagnostics.hidden_feet_share(kp, valid, (1920, 1080)) == 0.0
+    kp[:10, feet, 1] = 1200.0                  # below the image's bottom edge
+    kp[10:20, feet, 2] = 0.1                   # in the image, but not seen
+    assert diagnostics.hidden_feet_share(kp, valid, (1920, 1080)) == pytest.approx(0.5)
+    valid[20:] = False                         # only the frames with a person count
+    assert diagnostics.hidden_feet_share(kp, valid, (1920, 1080)) == pytest.approx(1.0)
+    assert diagnostics.hidden_feet_share(kp, np.zeros(40, bool), (1920, 1080)) == 0.0
+    assert diagnostics.hidden_feet_message(0.2) is None
+    assert "feet are out of the picture or hidden in 50%" in diagnostics.hidden_feet_message(0.5)
+    recon = SimpleNamespace(fps=25.0, meta={"diagnostics": {"hidden_feet": 0.9}})
+    assert "90%" in diagnostics_lines(recon)[0]

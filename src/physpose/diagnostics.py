@@ -11,6 +11,9 @@ somersaults off it, and back), and what the dynamics stage makes of them:
   jump lasts: the person stands on something the scene lacks, or the floor was misjudged.
   Without a support the simulated body falls to the floor and every sample of those windows is
   invalid; `support_boxes` gives the scene a box under the feet there.
+- `hidden_feet_share`: how often no foot landmark is seen (the feet are out of the picture or
+  hidden). The detector then guesses where the feet are, and the floor the kinematic fit puts
+  under them is a guess too.
 - `invalid_window_runs`: the frames of dynamics windows in which no simulated sample stayed
   valid (the output there is the least bad fall, not a reconstruction).
 """
@@ -19,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from physpose.joints import LANDMARK_INDEX
 from physpose.metrics import foot_points
 from physpose.reconstruction import frame_runs
 from physpose.scene import Box
@@ -28,6 +32,9 @@ JUMP_SIZES = 0.4           # a jump: the box centre moves more than this many bo
 JUMP_SPEED = 6.0           # ... plus this many box diagonals per second between the detections
 RAISED_HEIGHT = 0.3        # m, lowest sole point above the floor ...
 RAISED_SECONDS = 1.0       # ... for at least this long (no jump keeps both feet up that long)
+HIDDEN_FEET_SHARE = 0.3    # warn when no foot landmark is seen in this share of the frames
+FOOT_LANDMARKS = [LANDMARK_INDEX[f"{side}_{part}"] for side in ("left", "right")
+                  for part in ("ankle", "heel", "foot_index")]
 
 
 def image_box_corners(keypoints2d: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -72,6 +79,22 @@ def person_jumps(keypoints2d: np.ndarray, detected: np.ndarray, fps: float) -> l
                 or size_ratio(diagonal[a], diagonal[b]) > 2.0:
             jumps.append(int(b))
     return jumps
+
+
+def hidden_feet_share(keypoints2d: np.ndarray, valid: np.ndarray,
+                      image_size: tuple[int, int]) -> float:
+    """Share of the frames with landmarks (`valid`) in which no ankle, heel or toe landmark is
+    seen: each below MIN_CONFIDENCE or outside the image. 0 when no frame is valid."""
+    keypoints2d = np.asarray(keypoints2d, dtype=float)
+    valid = np.asarray(valid, dtype=bool)
+    if not valid.any():
+        return 0.0
+    feet = keypoints2d[valid][:, FOOT_LANDMARKS]
+    width, height = image_size
+    inside = (feet[..., 0] >= 0) & (feet[..., 0] < width) & (feet[..., 1] >= 0) \
+        & (feet[..., 1] < height)
+    seen = (inside & (feet[..., 2] >= MIN_CONFIDENCE)).any(axis=1)
+    return float(1.0 - seen.mean())
 
 
 def raised_runs(joints: np.ndarray, fps: float) -> list[tuple[int, int, float]]:
@@ -153,6 +176,16 @@ def jumps_message(frames: list[int], fps: float) -> str | None:
             "video to that person")
 
 
+def hidden_feet_message(share: float) -> str | None:
+    """A warning on `hidden_feet_share`, or None below HIDDEN_FEET_SHARE."""
+    if share < HIDDEN_FEET_SHARE:
+        return None
+    return (f"input: the feet are out of the picture or hidden in {100 * share:.0f}% of the "
+            "frames with a person: the detector guesses where they are, so the floor, the "
+            "foot contacts and the physics resting on them are guesses too. Film the whole "
+            "person, feet included")
+
+
 def raised_message(runs: list[tuple[int, int, float]], fps: float, supported: bool = True
                    ) -> str | None:
     """A warning on `raised_runs`, or None; `supported`: whether a support box was added."""
@@ -181,6 +214,7 @@ def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
 def warning_lines(found: dict, fps: float) -> list[str]:
     """The warnings of a reconstruction's meta ``diagnostics`` (as the pipeline stores them)."""
     lines = [jumps_message(found.get("person_jumps", []), fps),
+             hidden_feet_message(found.get("hidden_feet", 0.0)),
              raised_message([tuple(r) for r in found.get("raised", [])], fps,
                             supported=bool(found.get("supports"))),
              invalid_message([tuple(r) for r in found.get("invalid_windows", [])], fps)]

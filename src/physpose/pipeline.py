@@ -118,6 +118,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     lap("observe")
     jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
     _warn(diagnostics.jumps_message(jumps, obs.fps))
+    hidden_feet = diagnostics.hidden_feet_share(obs.keypoints2d, obs.valid, obs.image_size)
+    _warn(diagnostics.hidden_feet_message(hidden_feet))
     kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
                          **({"log": stderr_log} if progress else {}))
     lap("kinematics")
@@ -139,7 +141,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     meta = dict(recon.meta)
     meta.update(timings_s=timings, dynamics={**phys.meta(), "timings": phys.timings},
                 physpose_version=__version__,
-                diagnostics={"person_jumps": jumps, "raised": [list(r) for r in raised],
+                diagnostics={"person_jumps": jumps, "hidden_feet": hidden_feet,
+                             "raised": [list(r) for r in raised],
                              "supports": [[*b.center, *b.size] for b in supports],
                              "invalid_windows": [list(r) for r in invalid]})
     recon = recon.replace(meta=meta)
