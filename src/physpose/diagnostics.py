@@ -10,7 +10,7 @@ somersaults off it, and back), and what the dynamics stage makes of them:
 - `raised_runs`: the kinematic estimate's feet stay well above the floor for longer than any
   jump lasts: the person stands on something the scene lacks, or the floor was misjudged.
   Without a support the simulated body falls to the floor and every sample of those windows is
-  invalid; `support_boxes` gives the scene a box under the feet there.
+  invalid; `physpose.supports` gives the scene a box under the feet there.
 - `hidden_feet_share`: how often no foot landmark is seen (the feet are out of the picture or
   hidden). The detector then guesses where the feet are, and the floor the kinematic fit puts
   under them is a guess too.
@@ -25,7 +25,6 @@ import numpy as np
 from physpose.joints import LANDMARK_INDEX
 from physpose.metrics import foot_points
 from physpose.reconstruction import frame_runs
-from physpose.scene import Box
 
 MIN_CONFIDENCE = 0.3       # landmarks that count for the person's image box
 JUMP_SIZES = 0.4           # a jump: the box centre moves more than this many box diagonals ...
@@ -107,40 +106,6 @@ def raised_runs(joints: np.ndarray, fps: float) -> list[tuple[int, int, float]]:
         if (b - a + 1) / fps >= RAISED_SECONDS:
             out.append((a, b, float(np.median(lowest[a:b + 1]))))
     return out
-
-
-SUPPORT_MARGIN = 0.3       # m added on every side of the feet's extent for a support box
-RESTING_SPEED = 0.5        # m/s, a foot slower than this rests on its support
-
-
-def support_boxes(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: float
-                  ) -> tuple[Box, ...]:
-    """One box per `raised_runs` stretch, standing on the floor under the feet where they
-    rest (the lower foot slower than RESTING_SPEED; a stretch can end in a leap off the
-    support): its top at the 10th percentile of the resting feet's lowest point (they stand
-    on it, not in it), its sides SUPPORT_MARGIN beyond where the resting soles are. The
-    estimate says that something holds the person up there; this is the simplest such thing.
-    A stretch without resting frames gets none."""
-    if not runs:
-        return ()
-    soles = foot_points(np.asarray(joints, dtype=float))       # (T, 2, P, 3)
-    centres = soles.mean(axis=2)                                 # (T, 2, 3)
-    speed = np.linalg.norm(np.gradient(centres, axis=0), axis=-1) * fps
-    lower = soles[..., 2].min(axis=2).argmin(axis=1)             # (T,) the lower foot
-    resting = speed[np.arange(len(soles)), lower] < RESTING_SPEED
-    boxes = []
-    for a, b, _ in runs:
-        frames = a + np.flatnonzero(resting[a:b + 1])
-        if not len(frames):
-            continue
-        points = soles[frames].reshape(-1, 3)
-        top = float(np.percentile(soles[frames, ..., 2].min(axis=(1, 2)), 10))
-        lo = points[:, :2].min(axis=0) - SUPPORT_MARGIN
-        hi = points[:, :2].max(axis=0) + SUPPORT_MARGIN
-        centre = 0.5 * (lo + hi)
-        boxes.append(Box(center=(float(centre[0]), float(centre[1]), top / 2),
-                         size=(float(hi[0] - lo[0]), float(hi[1] - lo[1]), top)))
-    return tuple(boxes)
 
 
 def invalid_window_runs(windows: list[dict]) -> list[tuple[int, int]]:

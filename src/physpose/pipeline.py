@@ -17,7 +17,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from physpose import __version__, diagnostics
+from physpose import __version__, diagnostics, supports
 from physpose.body import BodyConfig, build_body
 from physpose.cache import atomic_path
 from physpose.dynamics import PRESETS as DYNAMICS_PRESETS
@@ -41,7 +41,7 @@ class PipelineConfig:
     """Every stage's settings; the kinematic variant defaults to the paper's SO+GT.
 
     auto_support: where the estimate's feet stay above the floor for longer than a jump
-    (diagnostics.raised_runs), add a box under them to the scene (diagnostics.support_boxes).
+    (diagnostics.raised_runs), add a box under them to the scene (supports.support_boxes).
     """
 
     observe: ObserveConfig = field(default_factory=ObserveConfig)
@@ -124,11 +124,11 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                          **({"log": stderr_log} if progress else {}))
     lap("kinematics")
     raised = diagnostics.raised_runs(kin.joints, kin.fps)
-    supports = diagnostics.support_boxes(kin.joints, raised, kin.fps) if config.auto_support else ()
-    _warn(diagnostics.raised_message(raised, kin.fps, supported=bool(supports)))
+    boxes = supports.support_boxes(kin.joints, raised, kin.fps) if config.auto_support else ()
+    _warn(diagnostics.raised_message(raised, kin.fps, supported=bool(boxes)))
     scene = config.scene
-    if supports:
-        scene = dataclasses.replace(scene, obstacles=scene.obstacles + supports)
+    if boxes:
+        scene = dataclasses.replace(scene, obstacles=scene.obstacles + boxes)
     body = build_body(kin.shape, scene, config.body)
     lap("body")
     phys = optimize_dynamics(body, kin, obs, config.dynamics, checkpoint_dir=windows,
@@ -143,7 +143,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                 physpose_version=__version__,
                 diagnostics={"person_jumps": jumps, "hidden_feet": hidden_feet,
                              "raised": [list(r) for r in raised],
-                             "supports": [[*b.center, *b.size] for b in supports],
+                             "supports": [[*b.center, *b.size] for b in boxes],
                              "invalid_windows": [list(r) for r in invalid]})
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)
