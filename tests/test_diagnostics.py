@@ -104,3 +104,15 @@ def test_feet_out_of_the_picture_or_unseen_are_counted_and_warned_about():
     assert "feet are out of the picture or hidden in 50%" in diagnostics.hidden_feet_message(0.5)
     recon = SimpleNamespace(fps=25.0, meta={"diagnostics": {"hidden_feet": 0.9}})
     assert "90%" in diagnostics_lines(recon)[0]
+
+
+def test_the_seated_warning_names_frames_and_the_seat():
+    from physpose.scene import Box
+    seat = Box(center=(-0.1, 0.0, 0.33), size=(0.5, 0.48, 0.1))
+    text = diagnostics.seated_message([(36, 75, 0.38)], (seat,), 25.0)
+    assert "36-75" in text and "box:-0.10,0.00,0.33,0.50,0.48,0.10" in text
+    assert "no seat was added" in diagnostics.seated_message([(36, 75, 0.38)], (), 25.0)
+    assert diagnostics.seated_message([], (), 25.0) is None
+    recon = SimpleNamespace(fps=25.0, meta={"diagnostics": {
+        "seated": [[36, 75, 0.38]], "seats": [seat.spec()]}})
+    assert "puts a seat there (box:-0.10" in diagnostics_lines(recon)[0]

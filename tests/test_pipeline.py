@@ -72,7 +72,8 @@ def test_reconstruct_writes_the_contract(tmp_path):
     assert loaded.meta["dynamics"]["reference"]["root_residual_median"] < 0.05
     # A clean simulated clip raises none of the input warnings (physpose.diagnostics).
     assert loaded.meta["diagnostics"] == {"person_jumps": [], "hidden_feet": 0.0, "raised": [],
-                                          "supports": [], "invalid_windows": []}
+                                          "supports": [], "seated": [], "seats": [],
+                                          "invalid_windows": []}
     resolved = json.loads((tmp_path / CONFIG_FILE).read_text())
     assert resolved["config"]["dynamics"]["iterations"] == cfg.dynamics.iterations
     assert any((tmp_path / "dynamics_windows").iterdir())

@@ -38,3 +38,47 @@ def test_a_box_under_feet_that_stay_raised(standing):
     leap[32:40, :, 0] += np.linspace(0.2, 1.6, 8)[:, None]
     (box2,) = supports.support_boxes(leap, [run], fps)
     assert box2.center[0] + box2.size[0] / 2 < box.center[0] + box.size[0] / 2 + 0.25
+
+
+@pytest.fixture(scope="module")
+def sitting():
+    from physpose.dynamics.synthetic import sitting_scene
+    bare = build_body(BodyShape.from_height(1.75))
+    seated = build_body(bare.shape, sitting_scene(bare))
+    fit, _, _ = simulated_clip(seated, "sit", seconds=3.0)
+    return fit.joints, fit.fps, sitting_scene(bare).obstacles[0]
+
+
+def test_a_seat_under_a_person_who_sits(sitting, standing):
+    joints, fps, true_seat = sitting
+    (run,) = supports.seated_runs(joints, fps)
+    first, last, top = run
+    assert (last - first + 1) / fps >= 1.0 and last == len(joints) - 1
+    true_top = true_seat.center[2] + true_seat.size[2] / 2
+    assert true_top - 0.03 < top <= true_top + 0.01      # under the thighs, not in them
+    (seat,) = supports.seat_boxes(joints, [run])
+    assert seat.center[2] + seat.size[2] / 2 == pytest.approx(top)
+    # The hips are over the seat; the feet are in front of it, clear of it.
+    c, s = np.cos(seat.yaw), np.sin(seat.yaw)
+    local = lambda p: np.array([[c, s], [-s, c]]) @ (p[:2] - np.array(seat.center[:2]))  # noqa: E731
+    from physpose.joints import JOINT_INDEX as J
+    for name in ("l_hip", "r_hip"):
+        assert (np.abs(local(joints[last, J[name]])) < np.array(seat.size[:2]) / 2).all()
+    for name in ("l_heel", "r_heel", "l_toe", "r_toe"):
+        assert local(joints[last, J[name]])[0] > seat.size[0] / 2
+    # Standing, stepping, and the sitting pose lowered onto the floor (lying, sitting on it)
+    # get no seat.
+    assert supports.seated_runs(standing[0], standing[1]) == []
+    low = joints.copy()
+    low[..., 2] -= 0.35
+    assert supports.seated_runs(low, fps) == []
+    assert supports.seat_boxes(joints, []) == ()
+
+
+def test_a_box_prints_as_the_obstacle_option_reads_it():
+    from physpose.scene import Box, parse_obstacle
+    box = Box(center=(0.1, -0.25, 0.4), size=(0.5, 0.45, 0.1), yaw=np.radians(30))
+    assert box.spec() == "box:0.10,-0.25,0.40,0.50,0.45,0.10,30"
+    again = parse_obstacle(box.spec())
+    assert again.center == pytest.approx(box.center) and again.yaw == pytest.approx(box.yaw)
+    assert Box(center=(0, 0, 0.5), size=(1, 1, 1)).spec() == "box:0.00,0.00,0.50,1.00,1.00,1.00"

@@ -25,6 +25,7 @@ import numpy as np
 from physpose.joints import LANDMARK_INDEX
 from physpose.metrics import foot_points
 from physpose.reconstruction import frame_runs
+from physpose.scene import parse_obstacle
 
 MIN_CONFIDENCE = 0.3       # landmarks that count for the person's image box
 JUMP_SIZES = 0.4           # a jump: the box centre moves more than this many box diagonals ...
@@ -166,6 +167,19 @@ def raised_message(runs: list[tuple[int, int, float]], fps: float, supported: bo
             "box:x,y,z,sx,sy,sz (centre and sizes in world metres, docs/body_model.md)")
 
 
+def seated_message(runs: list[tuple[int, int, float]], seats: tuple, fps: float) -> str | None:
+    """A warning on `supports.seated_runs`, or None; `seats`: the boxes added (may be empty)."""
+    if not runs:
+        return None
+    where = ", ".join(f"{_span(a, b, fps)}, seat {h:.2f} m up" for a, b, h in runs)
+    what = (f"physpose puts a seat there ({' '.join(b.spec() for b in seats)}; "
+            "--no-auto-support: none, and the simulated body falls)" if seats else
+            "no seat was added (--no-auto-support), so the simulated body falls there")
+    return (f"kinematics: the person sits at frames {where} (thighs level, the trunk behind "
+            f"the feet): no body balances so on its feet alone. {what}; give the real seat "
+            "with --obstacle box:x,y,z,sx,sy,sz[,yaw_deg] (centre and sizes in world metres)")
+
+
 def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
     """A warning on `invalid_window_runs`, or None."""
     if not runs:
@@ -182,5 +196,7 @@ def warning_lines(found: dict, fps: float) -> list[str]:
              hidden_feet_message(found.get("hidden_feet", 0.0)),
              raised_message([tuple(r) for r in found.get("raised", [])], fps,
                             supported=bool(found.get("supports"))),
+             seated_message([tuple(r) for r in found.get("seated", [])],
+                            tuple(parse_obstacle(b) for b in found.get("seats", [])), fps),
              invalid_message([tuple(r) for r in found.get("invalid_windows", [])], fps)]
     return [line for line in lines if line]

@@ -41,7 +41,8 @@ class PipelineConfig:
     """Every stage's settings; the kinematic variant defaults to the paper's SO+GT.
 
     auto_support: where the estimate's feet stay above the floor for longer than a jump
-    (diagnostics.raised_runs), add a box under them to the scene (supports.support_boxes).
+    (diagnostics.raised_runs), add a box under them to the scene (supports.support_boxes);
+    where the person sits (supports.seated_runs), a seat (supports.seat_boxes).
     """
 
     observe: ObserveConfig = field(default_factory=ObserveConfig)
@@ -126,9 +127,12 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     raised = diagnostics.raised_runs(kin.joints, kin.fps)
     boxes = supports.support_boxes(kin.joints, raised, kin.fps) if config.auto_support else ()
     _warn(diagnostics.raised_message(raised, kin.fps, supported=bool(boxes)))
+    seated = supports.seated_runs(kin.joints, kin.fps)
+    seats = supports.seat_boxes(kin.joints, seated) if config.auto_support else ()
+    _warn(diagnostics.seated_message(seated, seats, kin.fps))
     scene = config.scene
-    if boxes:
-        scene = dataclasses.replace(scene, obstacles=scene.obstacles + boxes)
+    if boxes or seats:
+        scene = dataclasses.replace(scene, obstacles=scene.obstacles + boxes + seats)
     body = build_body(kin.shape, scene, config.body)
     lap("body")
     phys = optimize_dynamics(body, kin, obs, config.dynamics, checkpoint_dir=windows,
@@ -144,6 +148,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                 diagnostics={"person_jumps": jumps, "hidden_feet": hidden_feet,
                              "raised": [list(r) for r in raised],
                              "supports": [[*b.center, *b.size] for b in boxes],
+                             "seated": [list(r) for r in seated],
+                             "seats": [b.spec() for b in seats],
                              "invalid_windows": [list(r) for r in invalid]})
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)

@@ -55,6 +55,12 @@ class Box:
                                 remedy="give full side lengths in metres: "
                                        "box:x,y,z,sx,sy,sz[,yaw_deg]")
 
+    def spec(self) -> str:
+        """The box as `parse_obstacle` (and --obstacle) reads it, centimetre precision."""
+        values = (*self.center, *self.size)
+        text = "box:" + ",".join(f"{v:.2f}" for v in values)
+        return text + (f",{math.degrees(self.yaw):.0f}" if self.yaw else "")
+
 
 @dataclass(frozen=True)
 class SceneConfig:

@@ -101,8 +101,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="ground damping, 1/s (default: critical for the stiffness)")
     g.add_argument("--auto-support", action=argparse.BooleanOptionalAction, default=True,
                    help="where the person's feet stay above the floor for longer than a jump, "
-                        "put a box under them (default on; --no-auto-support: none, and the "
-                        "simulated body falls there)")
+                        "put a box under them, and where the person sits, a seat (default on; "
+                        "--no-auto-support: none, and the simulated body falls there)")
     g.add_argument("--trampoline", action="store_true",
                    help="a soft, springy floor (stiffness 150, damping 1.5)")
     g.add_argument("--obstacle", action="append", default=[], metavar="box:x,y,z,sx,sy,sz[,yaw]",

@@ -7,22 +7,32 @@ targets that reproduce it. Motions start from the standing keyframe:
 - ``stand``: quiet standing with a slow arm movement;
 - ``shift``: a lateral weight shift (hips and ankles roll) with arm swings;
 - ``step``: the weight shift plus lifting the unloaded foot about 5 cm and setting it down.
+
+``sit`` starts seated instead (hips and knees bent 86 degrees, feet on the floor) on the seat
+of `sitting_scene`, which the body must be built with, and leans the trunk forward and back.
 """
 
 from __future__ import annotations
 
+import dataclasses
+
+import mujoco
 import numpy as np
 
 from physpose.body import Body, standing_qpos
+from physpose.dynamics.init import geom_lowest
 from physpose.dynamics.objective import project
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
 from physpose.joints import LANDMARK_INDEX
 from physpose.metrics import transform_points
 from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
+from physpose.scene import Box, SceneConfig
 from physpose.skeleton import DOF_NAMES, NV
 
-MOTIONS = ("stand", "shift", "step")
+MOTIONS = ("stand", "shift", "step")   # from standing, on the bare floor
+SIT = "sit"                              # seated, on the seat of `sitting_scene`
+SEAT_FLEXION = 1.5                       # rad, hips and knees of the seated pose
 IMAGE_SIZE = (1280, 720)  # px
 FOCAL = 1000.0            # px
 CAMERA_DISTANCE = 4.0     # m in front of the person
@@ -33,11 +43,50 @@ def _dof(name: str) -> int:
     return DOF_NAMES.index(name)
 
 
+def _lowest(model: mujoco.MjModel, qpos: np.ndarray, bodies: tuple[str, ...]) -> float:
+    """Lowest z (m) of the geoms of the named bodies at qpos."""
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    ids = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in bodies}
+    return min(geom_lowest(model, data, g) for g in range(model.ngeom)
+               if model.geom_bodyid[g] in ids)
+
+
+def seated_qpos(body: Body) -> np.ndarray:
+    """(55,) the standing pose with hips and knees bent SEAT_FLEXION, lowered until the soles
+    are on z = 0 (the thighs then rest on `sitting_scene`'s seat)."""
+    q = standing_qpos(body).copy()
+    for side in "lr":
+        q[7 + _dof(f"{side}_hip_y")] = -SEAT_FLEXION
+        q[7 + _dof(f"{side}_knee_y")] = SEAT_FLEXION
+    q[2] -= _lowest(body.model, q, ("l_ankle", "r_ankle"))
+    return q
+
+
+def sitting_scene(body: Body) -> SceneConfig:
+    """The body's scene plus the seat `seated_qpos` rests on: a 10 cm slab (a chair seat) under
+    the thighs, its top where they are lowest, from 25 cm behind the hips to 55 % of the way
+    to the knees (the calves hang clear of it), 15 cm wider than the hips on each side."""
+    q = seated_qpos(body)
+    top = _lowest(body.model, q, ("l_hip", "r_hip"))
+    data = mujoco.MjData(body.model)
+    data.qpos[:] = q
+    mujoco.mj_kinematics(body.model, data)
+    hip = data.xpos[body.body_ids["l_hip"]]
+    knee = data.xpos[body.body_ids["l_knee"]]
+    back, front = q[0] - 0.25, q[0] + 0.55 * (knee[0] - hip[0])
+    half_width = abs(hip[1] - q[1]) + 0.15
+    seat = Box(center=(0.5 * (back + front), float(q[1]), top - 0.05),
+               size=(front - back, 2 * half_width, 0.1))
+    return dataclasses.replace(body.scene, obstacles=body.scene.obstacles + (seat,))
+
+
 def motion_targets(body: Body, kind: str, seconds: float) -> np.ndarray:
     """Servo targets (S, 48) at every simulation step of the named motion."""
-    if kind not in MOTIONS:
-        raise ValueError(f"unknown motion {kind!r}; choose one of {MOTIONS}")
-    q0 = standing_qpos(body)
+    if kind not in (*MOTIONS, SIT):
+        raise ValueError(f"unknown motion {kind!r}; choose one of {(*MOTIONS, SIT)}")
+    q0 = seated_qpos(body) if kind == SIT else standing_qpos(body)
     dt = body.model.opt.timestep
     t = np.arange(int(round(seconds / dt))) * dt
     targets = np.tile(q0[7:], (len(t), 1))
@@ -45,6 +94,9 @@ def motion_targets(body: Body, kind: str, seconds: float) -> np.ndarray:
     wave = np.sin(np.pi * t) * ease  # 0.5 Hz
     targets[:, _dof("r_elbow_y")] -= 0.4 * (1.0 - np.cos(np.pi * t)) / 2.0
     if kind == "stand":
+        return targets
+    if kind == SIT:
+        targets[:, _dof("spine_y")] -= 0.2 * (1.0 - np.cos(np.pi * t)) / 2.0
         return targets
     for side in "lr":
         targets[:, _dof(f"{side}_hip_x")] += 0.04 * wave
@@ -72,8 +124,12 @@ def simulated_clip(body: Body, kind: str = "step", seconds: float = 2.0, fps: fl
                    ) -> tuple[KinematicFit, Observations, np.ndarray]:
     """(kinematic input, detections, true targets (S, 48)) of a simulated motion."""
     targets = motion_targets(body, kind, seconds)
+    if kind == SIT and not body.scene.obstacles:
+        raise ValueError("the sit motion needs its seat: build the body with "
+                         "sitting_scene(body) as its scene")
     sim = sim_model(body)
-    state0 = make_state(sim, standing_qpos(body), np.zeros(NV))
+    start = seated_qpos(body) if kind == SIT else standing_qpos(body)
+    state0 = make_state(sim, start, np.zeros(NV))
     with Simulator(sim, nthread=1) as simulator:
         traj = simulator.run(state0, targets[None])
     frames = np.arange(int(round(seconds * fps)) + 1)
