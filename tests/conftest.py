@@ -1,4 +1,5 @@
-"""Shared fixtures: locations of the real evaluation material, skipped cleanly when absent."""
+"""Shared fixtures: locations of the real evaluation material, skipped cleanly when absent, and
+a simulated standing motion."""
 
 from __future__ import annotations
 
@@ -34,3 +35,14 @@ def sports2d_demo() -> Path:
     if not video.is_file():
         pytest.skip(f"sports2d demo not found at {video}; run `make data`")
     return video
+
+
+@pytest.fixture(scope="session")
+def standing() -> tuple:
+    """(joints (T, 21, 3), fps) of 2 s of simulated quiet standing (dynamics.synthetic)."""
+    from physpose.body import build_body  # noqa: PLC0415
+    from physpose.dynamics.synthetic import simulated_clip  # noqa: PLC0415
+    from physpose.shape import BodyShape  # noqa: PLC0415
+
+    fit, _, _ = simulated_clip(build_body(BodyShape.from_height(1.7)), "stand", seconds=2.0)
+    return fit.joints, fit.fps

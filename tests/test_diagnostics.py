@@ -9,10 +9,7 @@ import numpy as np
 import pytest
 
 from physpose import diagnostics
-from physpose.body import build_body
 from physpose.cli.reconstruct import diagnostics_lines
-from physpose.dynamics.synthetic import simulated_clip
-from physpose.shape import BodyShape
 
 
 def _walker(frames: int, fps: float, speed_px: float = 300.0, size: float = 400.0) -> np.ndarray:
@@ -46,12 +43,6 @@ def test_another_person_or_a_cut_is_a_jump():
     # Frames with too few confident landmarks neither jump nor hide a jump.
     kp[28:30, :, 2] = 0.0
     assert diagnostics.person_jumps(kp, np.ones(60, bool), fps) == [30]
-
-
-@pytest.fixture(scope="module")
-def standing():
-    fit, _, _ = simulated_clip(build_body(BodyShape.from_height(1.7)), "stand", seconds=2.0)
-    return fit.joints, fit.fps
 
 
 def test_feet_above_the_floor_for_longer_than_a_jump(standing):

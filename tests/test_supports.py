@@ -13,12 +13,6 @@ from physpose.metrics import foot_points
 from physpose.shape import BodyShape
 
 
-@pytest.fixture(scope="module")
-def standing():
-    fit, _, _ = simulated_clip(build_body(BodyShape.from_height(1.7)), "stand", seconds=2.0)
-    return fit.joints, fit.fps
-
-
 def test_a_box_under_feet_that_stay_raised(standing):
     joints, fps = standing
     up = joints.copy()
