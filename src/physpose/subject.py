@@ -120,15 +120,21 @@ def seed_regions(point: tuple[float, float], image_size: tuple[int, int]) -> lis
     return boxes
 
 
+def detection_box(keypoints2d: np.ndarray) -> np.ndarray | None:
+    """[x0, y0, x1, y1] of one detection's (33, 3) confident landmarks, None if too few."""
+    lo, hi, ok = image_box_corners(np.asarray(keypoints2d, dtype=float)[None])
+    return np.concatenate([lo[0], hi[0]]) if ok[0] else None
+
+
 def covers(keypoints2d: np.ndarray, point: tuple[float, float]) -> bool:
     """Whether one detection's (33, 3) confident landmarks' box, grown by COVER_MARGIN of its
     diagonal, contains the point."""
-    lo, hi, ok = image_box_corners(np.asarray(keypoints2d, dtype=float)[None])
-    if not ok[0]:
+    box = detection_box(keypoints2d)
+    if box is None:
         return False
-    grow = COVER_MARGIN * np.linalg.norm(hi[0] - lo[0])
+    grow = COVER_MARGIN * np.linalg.norm(box[2:] - box[:2])
     p = np.asarray(point, dtype=float)
-    return bool(np.all(p >= lo[0] - grow) and np.all(p <= hi[0] + grow))
+    return bool(np.all(p >= box[:2] - grow) and np.all(p <= box[2:] + grow))
 
 
 class Follower:
@@ -139,12 +145,7 @@ class Follower:
         self.fps = fps
         self.full = np.array([0.0, 0.0, float(image_size[0]), float(image_size[1])])
         self.unseen = 0
-        self._box = self._box_of(keypoints2d)
-
-    @staticmethod
-    def _box_of(keypoints2d: np.ndarray) -> np.ndarray | None:
-        lo, hi, ok = image_box_corners(np.asarray(keypoints2d, dtype=float)[None])
-        return np.concatenate([lo[0], hi[0]]) if ok[0] else None
+        self._box = detection_box(keypoints2d)
 
     def region(self) -> np.ndarray:
         """The box [x0, y0, x1, y1] (pixels, clipped to the image) to look in next."""
@@ -155,7 +156,7 @@ class Follower:
 
     def update(self, keypoints2d: np.ndarray | None) -> None:
         """Take this frame's detection in the region (None: not found)."""
-        box = None if keypoints2d is None else self._box_of(keypoints2d)
+        box = None if keypoints2d is None else detection_box(keypoints2d)
         if box is None:
             self.unseen += 1
         else:

@@ -77,6 +77,12 @@ def _outside(point: np.ndarray, outline: np.ndarray) -> float:
     return float((hull.equations[:, :2] @ point + hull.equations[:, 2]).max())
 
 
+def _hips_and_thighs(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 2, 3) hip joints (left, right) and (T, 2, 3) hip-to-knee vectors."""
+    hips = joints[:, [JOINT_INDEX["l_hip"], JOINT_INDEX["r_hip"]]]
+    return hips, joints[:, [JOINT_INDEX["l_knee"], JOINT_INDEX["r_knee"]]] - hips
+
+
 def seated_runs(joints: np.ndarray, fps: float) -> list[tuple[int, int, float]]:
     """(first, last, seat height m) of each stretch of at least SEAT_SECONDS in which a motion
     (T, 21, 3; world z up, floor at 0) sits: both thighs within SEAT_THIGH_ANGLE of level,
@@ -88,8 +94,7 @@ def seated_runs(joints: np.ndarray, fps: float) -> list[tuple[int, int, float]]:
     t = len(joints)
     if t < 3:
         return []
-    hips = joints[:, [JOINT_INDEX["l_hip"], JOINT_INDEX["r_hip"]]]
-    thighs = joints[:, [JOINT_INDEX["l_knee"], JOINT_INDEX["r_knee"]]] - hips
+    hips, thighs = _hips_and_thighs(joints)
     level = np.abs(np.arcsin(np.clip(thighs[..., 2] / np.maximum(
         np.linalg.norm(thighs, axis=-1), 1e-9), -1, 1))) < SEAT_THIGH_ANGLE
     trunk = joints[:, _TRUNK, :2].mean(axis=1)
@@ -114,9 +119,7 @@ def seat_boxes(joints: np.ndarray, runs: list[tuple[int, int, float]]) -> tuple[
     joints = np.asarray(joints, dtype=float)
     boxes = []
     for a, b, top in runs:
-        span = joints[a:b + 1]
-        hips = span[:, [JOINT_INDEX["l_hip"], JOINT_INDEX["r_hip"]]]
-        thighs = span[:, [JOINT_INDEX["l_knee"], JOINT_INDEX["r_knee"]]] - hips
+        hips, thighs = _hips_and_thighs(joints[a:b + 1])
         forward = np.median(thighs[..., :2].reshape(-1, 2), axis=0)
         forward /= max(np.linalg.norm(forward), 1e-9)
         thigh = float(np.median(np.linalg.norm(thighs, axis=-1)))

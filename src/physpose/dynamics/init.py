@@ -236,9 +236,12 @@ def geom_lowest(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> float:
     return float(pos[2] - size[0])
 
 
-def lowest_point(model: mujoco.MjModel, data: mujoco.MjData) -> float:
-    """Lowest z (m) of any body geom after mj_kinematics."""
-    return min(geom_lowest(model, data, g) for g in range(model.ngeom) if model.geom_bodyid[g])
+def lowest_point(model: mujoco.MjModel, data: mujoco.MjData,
+                 bodies: set[int] | None = None) -> float:
+    """Lowest z (m) of any body geom (or of the geoms of `bodies`, body ids) after
+    mj_kinematics."""
+    return min(geom_lowest(model, data, g) for g in range(model.ngeom) if model.geom_bodyid[g]
+               and (bodies is None or model.geom_bodyid[g] in bodies))
 
 
 def ground_state(model: mujoco.MjModel, qpos: np.ndarray, snap: float) -> np.ndarray:

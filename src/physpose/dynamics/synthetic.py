@@ -20,7 +20,7 @@ import mujoco
 import numpy as np
 
 from physpose.body import Body, standing_qpos
-from physpose.dynamics.init import geom_lowest
+from physpose.dynamics.init import lowest_point
 from physpose.dynamics.objective import project
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
 from physpose.joints import LANDMARK_INDEX
@@ -43,14 +43,17 @@ def _dof(name: str) -> int:
     return DOF_NAMES.index(name)
 
 
-def _lowest(model: mujoco.MjModel, qpos: np.ndarray, bodies: tuple[str, ...]) -> float:
-    """Lowest z (m) of the geoms of the named bodies at qpos."""
-    data = mujoco.MjData(model)
+def _posed(body: Body, qpos: np.ndarray) -> mujoco.MjData:
+    """The body's kinematics at qpos."""
+    data = mujoco.MjData(body.model)
     data.qpos[:] = qpos
-    mujoco.mj_kinematics(model, data)
-    ids = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, b) for b in bodies}
-    return min(geom_lowest(model, data, g) for g in range(model.ngeom)
-               if model.geom_bodyid[g] in ids)
+    mujoco.mj_kinematics(body.model, data)
+    return data
+
+
+def _lowest(body: Body, qpos: np.ndarray, segments: tuple[str, ...]) -> float:
+    """Lowest z (m) of the named segments' geoms at qpos."""
+    return lowest_point(body.model, _posed(body, qpos), {body.body_ids[n] for n in segments})
 
 
 def seated_qpos(body: Body) -> np.ndarray:
@@ -60,7 +63,7 @@ def seated_qpos(body: Body) -> np.ndarray:
     for side in "lr":
         q[7 + _dof(f"{side}_hip_y")] = -SEAT_FLEXION
         q[7 + _dof(f"{side}_knee_y")] = SEAT_FLEXION
-    q[2] -= _lowest(body.model, q, ("l_ankle", "r_ankle"))
+    q[2] -= _lowest(body, q, ("l_ankle", "r_ankle"))
     return q
 
 
@@ -69,10 +72,8 @@ def sitting_scene(body: Body) -> SceneConfig:
     the thighs, its top where they are lowest, from 25 cm behind the hips to 55 % of the way
     to the knees (the calves hang clear of it), 15 cm wider than the hips on each side."""
     q = seated_qpos(body)
-    top = _lowest(body.model, q, ("l_hip", "r_hip"))
-    data = mujoco.MjData(body.model)
-    data.qpos[:] = q
-    mujoco.mj_kinematics(body.model, data)
+    top = _lowest(body, q, ("l_hip", "r_hip"))
+    data = _posed(body, q)
     hip = data.xpos[body.body_ids["l_hip"]]
     knee = data.xpos[body.body_ids["l_knee"]]
     back, front = q[0] - 0.25, q[0] + 0.55 * (knee[0] - hip[0])
