@@ -178,6 +178,66 @@ def test_bvh_length_unit_is_guessed(tmp_path, unit):
     assert other.joints == pytest.approx(metres.joints, abs=1e-9)
 
 
+# Other exporters' joint names for the test skeleton's joints (3ds Max Biped, MotionBuilder
+# HumanIK with its character prefix).
+_BIPED = {"Hips": "Bip01 Pelvis", "Spine": "Bip01 Spine", "Neck": "Bip01 Neck",
+          "Head": "Bip01 Head"} | {
+    f"{side}{part}": f"Bip01 {side[0]} {biped}" for side in ("Left", "Right")
+    for part, biped in (("UpLeg", "Thigh"), ("Leg", "Calf"), ("Foot", "Foot"),
+                        ("ToeBase", "Toe0"), ("Arm", "UpperArm"), ("ForeArm", "Forearm"),
+                        ("Hand", "Hand"))}
+_ROLL_BONE = """JOINT {name}
+{{
+  OFFSET 0 -0.2 0
+  CHANNELS 0
+  End Site
+  {{
+    OFFSET 0 -0.01 0
+  }}
+}}"""
+
+
+def _renamed_bvh(path: Path, rename, roll_bones: bool = False) -> Path:
+    """The test skeleton with every joint renamed; optionally a twist bone (no channels) as the
+    first child of each knee and elbow, part-way down the shin or forearm."""
+    parent_of = {"Foot": "Leg", "Hand": "ForeArm"}
+    lines = []
+    for line in write_bvh(path, bvh_rows()).read_text().splitlines():
+        words = line.split()
+        if words[:1] in (["ROOT"], ["JOINT"]):
+            old = words[1]
+            part = old.removeprefix("Left").removeprefix("Right")
+            if roll_bones and part in parent_of:  # a sibling before the ankle or wrist
+                limb = rename(old.removesuffix(part) + parent_of[part])
+                lines.extend(_ROLL_BONE.format(name=limb + "Roll").splitlines())
+            line = line.replace(old, rename(old))
+        lines.append(line)
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("rename", [lambda n: _BIPED[n], lambda n: "Character1_" + n,
+                                    lambda n: "mixamorig:" + n], ids=["biped", "humanik",
+                                                                      "mixamo"])
+@pytest.mark.parametrize("roll_bones", [False, True], ids=["plain", "roll-bones"])
+def test_bvh_joint_names_of_other_exporters(tmp_path, rename, roll_bones):
+    """Knees and elbows are found by name after an exporter's prefix, and a limb's next joint
+    is the farthest child, not a twist bone: the same motion as the plain file."""
+    plain = load_mocap(write_bvh(tmp_path / "plain.bvh", bvh_rows()))
+    other = load_mocap(_renamed_bvh(tmp_path / "other.bvh", rename, roll_bones))
+    assert other.joints == pytest.approx(plain.joints, abs=1e-9)
+
+
+def test_a_prefix_does_not_make_a_thigh_a_knee(tmp_path):
+    """'UpperLeg_L' ends like 'leg' + 'l'; where the knee has no known name either, the deeper
+    of such joints is taken, which is the shin below the thigh."""
+    names = {"LeftUpLeg": "UpperLeg_L", "LeftLeg": "LowLeg_L", "RightUpLeg": "UpperLeg_R",
+             "RightLeg": "LowLeg_R"}
+    plain = load_mocap(write_bvh(tmp_path / "plain.bvh", bvh_rows()))
+    other = load_mocap(_renamed_bvh(tmp_path / "o.bvh", lambda n: names.get(n, n)))
+    assert other.joints == pytest.approx(plain.joints, abs=1e-9)
+
+
 def test_bvh_of_no_plausible_size_is_refused(tmp_path):
     with pytest.raises(PhysposeError, match="cannot tell the length unit.*rescale the file"):
         load_mocap(write_bvh(tmp_path / "tiny.bvh", bvh_rows(), unit=1000.0))

@@ -43,19 +43,48 @@ def _normalise(name: str) -> str:
     return re.sub(r"[^a-z0-9]", "", name.split(":")[-1].lower())
 
 
-def _find(names: list[str], side: str, bases: tuple[str, ...], path: str, what: str) -> int:
+def _name_tails(name: str) -> list[str]:
+    """The normalised name without 0, 1, 2... of its leading words ("Bip01 L Calf" ->
+    bip01lcalf, 01lcalf, lcalf, calf), so prefixes such as "Bip01" or "Character1_" drop."""
+    words = re.findall(r"[A-Z]+(?![a-z])|[A-Z]?[a-z]+|[0-9]+", name.split(":")[-1])
+    return ["".join(words[k:]).lower() for k in range(len(words))]
+
+
+def _depth(parents: list[int], k: int) -> int:
+    depth = 0
+    while parents[k] >= 0:
+        k, depth = parents[k], depth + 1
+    return depth
+
+
+def _find(names: list[str], parents: list[int], side: str, bases: tuple[str, ...], path: str,
+          what: str) -> int:
+    """The joint named like side + base (or base + side), e.g. LeftLeg, l_knee, KneeLeft; failing
+    that, a name ending so after a prefix (Bip01 L Calf, Character1_LeftLeg), the deepest such."""
     wanted = {w + b for w in _SIDE_WORDS[side] for b in bases}
     wanted |= {b + w for w in _SIDE_WORDS[side] for b in bases}
     hits = [k for k, n in enumerate(names) if _normalise(n) in wanted]
-    if not hits:
-        raise PhysposeError(f"no {('left', 'right')[side == 'r']} {what} joint found among "
-                            f"{names}", path=path,
-                            remedy=f"name the {what} joint like one of {sorted(wanted)[:6]}")
-    return hits[0]
+    if hits:
+        return hits[0]
+    tails = [k for k, n in enumerate(names) if wanted.intersection(_name_tails(n))]
+    if tails:
+        return max(tails, key=lambda k: _depth(parents, k))
+    raise PhysposeError(f"no {('left', 'right')[side == 'r']} {what} joint found among "
+                        f"{names}", path=path,
+                        remedy=f"name the {what} joint like one of {sorted(wanted)[:6]}")
 
 
 def _children(parents: list[int], k: int) -> list[int]:
     return [c for c, p in enumerate(parents) if p == k]
+
+
+def _next_joint(parents: list[int], pos0: np.ndarray, k: int) -> int | None:
+    """The child of k farthest from it (pos0: (N, 3), any frame; bones are rigid): the next
+    joint along a limb, not a twist or roll bone placed part-way along the segment."""
+    kids = _children(parents, k)
+    if not kids:
+        return None
+    return max(kids, key=lambda c: float(np.linalg.norm(pos0[c] - pos0[k])))
 
 
 def _leaves_below(parents: list[int], k: int) -> list[int]:
@@ -78,12 +107,11 @@ def _stance_down(rot: np.ndarray, height: np.ndarray, speed: np.ndarray,
 
 def _foot_points(pos, rot, parents, ankle, times, up):
     """Heel and toe sole points (T, 3) each for one foot (see module docstring)."""
-    balls = _children(parents, ankle)
-    if not balls:
+    ball = _next_joint(parents, pos[0], ankle)
+    if ball is None:
         raise PhysposeError("the skeleton has no foot segment below the ankle", remedy=(
             "use a skeleton with a foot (ankle -> toe) segment"))
-    ball = balls[0]
-    tips = _children(parents, ball)
+    tip = _next_joint(parents, pos[0], ball)
     a, b = pos[:, ankle], pos[:, ball]
     dt = np.gradient(times)
     speed = np.linalg.norm(np.gradient(b, axis=0), axis=1) / dt
@@ -95,8 +123,8 @@ def _foot_points(pos, rot, parents, ankle, times, up):
     fwd_foot = ab_local - (ab_local @ n_foot) * n_foot
     ab_along = np.linalg.norm(fwd_foot)
     fwd_foot /= ab_along
-    if tips:
-        tip_local = np.einsum("ji,j->i", rot[0, ball], pos[0, tips[0]] - b[0])
+    if tip is not None:
+        tip_local = np.einsum("ji,j->i", rot[0, ball], pos[0, tip] - b[0])
     else:
         tip_local = np.zeros(3)
     fwd_toe_dir = tip_local - (tip_local @ n_toe) * n_toe
@@ -129,30 +157,30 @@ def motion_from_tree(name: str, source: str, times: np.ndarray, names: list[str]
         raise PhysposeError(f"no head joint found among {names}", path=source,
                             remedy="name the head joint 'Head'")
     head = heads[0]
-    knee = {s: _find(names, s, _KNEE_NAMES, source, "knee") for s in SIDES}
-    elbow = {s: _find(names, s, _ELBOW_NAMES, source, "elbow") for s in SIDES}
+    knee = {s: _find(names, parents, s, _KNEE_NAMES, source, "knee") for s in SIDES}
+    elbow = {s: _find(names, parents, s, _ELBOW_NAMES, source, "elbow") for s in SIDES}
     points: dict[str, np.ndarray] = {}
     ankle = {}
     for s in SIDES:
-        kids = _children(parents, knee[s])
-        if not kids:
+        below_knee = _next_joint(parents, pos[0], knee[s])
+        if below_knee is None:
             raise PhysposeError(f"the {names[knee[s]]} joint has no ankle below it", path=source)
-        ankle[s] = kids[0]
+        ankle[s] = below_knee
         points[f"{s}_hip"] = pos[:, parents[knee[s]]]
         points[f"{s}_knee"] = pos[:, knee[s]]
         points[f"{s}_ankle"] = pos[:, ankle[s]]
-        wrists = _children(parents, elbow[s])
-        if not wrists:
+        wrist = _next_joint(parents, pos[0], elbow[s])
+        if wrist is None:
             raise PhysposeError(f"the {names[elbow[s]]} joint has no wrist below it", path=source)
         points[f"{s}_shoulder"] = pos[:, parents[elbow[s]]]
         points[f"{s}_elbow"] = pos[:, elbow[s]]
-        points[f"{s}_wrist"] = pos[:, wrists[0]]
+        points[f"{s}_wrist"] = pos[:, wrist]
     points["head"] = pos[:, head]
     up = infer_up_axis(points)
 
     # Rest-pose facing direction: from the ankles towards the balls of the feet, horizontal.
-    fwd = sum(rest_pos[_children(parents, ankle[s])[0]] - rest_pos[ankle[s]]
-              for s in SIDES if _children(parents, ankle[s]))
+    balls = {s: _next_joint(parents, pos[0], ankle[s]) for s in SIDES}
+    fwd = sum(rest_pos[balls[s]] - rest_pos[ankle[s]] for s in SIDES if balls[s] is not None)
     rest_up = rest_pos[head] - 0.5 * (rest_pos[ankle["l"]] + rest_pos[ankle["r"]])
     rest_up /= np.linalg.norm(rest_up)
     rest_fwd = fwd - (fwd @ rest_up) * rest_up
@@ -178,7 +206,7 @@ def motion_from_tree(name: str, source: str, times: np.ndarray, names: list[str]
 
     hand_rot = []
     for s in SIDES:
-        wrist = _children(parents, elbow[s])[0]
+        wrist = _next_joint(parents, pos[0], elbow[s])
         leaves = [k for k in _leaves_below(parents, wrist) if k != wrist]
         is_thumb = ["thumb" in "".join(norm[j] for j in _path(parents, wrist, k)) for k in leaves]
         fingers = [k for k, t in zip(leaves, is_thumb, strict=True) if not t]
