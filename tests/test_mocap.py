@@ -178,6 +178,38 @@ def test_bvh_length_unit_is_guessed(tmp_path, unit):
     assert other.joints == pytest.approx(metres.joints, abs=1e-9)
 
 
+def _smooth_rows(n: int, root_step: float = 0.01) -> list[list[float]]:
+    """Walking-speed motion: the root moving along z, the left knee bending slowly."""
+    rows = []
+    for i in range(n):
+        r = [0.0] * N_BVH_CHANNELS
+        r[:3] = [1.0, 0.95, root_step * i]
+        r[6 + 3 + 2] = 20.0 * np.sin(i / 5.0)   # LeftLeg Xrotation
+        rows.append(r)
+    return rows
+
+
+@pytest.mark.parametrize("held", [1, 3])
+def test_a_leading_rest_pose_is_dropped(tmp_path, held):
+    """A rest pose (arms out, at the origin) put before the capture, as many exports do, is
+    cut off: the clip is the capture alone."""
+    capture = _smooth_rows(30)
+    t_pose = [0.0] * N_BVH_CHANNELS
+    t_pose[1] = 0.95
+    t_pose[39], t_pose[48] = 90.0, -90.0   # LeftArm and RightArm Zrotation: arms out
+    plain = load_mocap(write_bvh(tmp_path / "plain.bvh", capture))
+    with_rest = load_mocap(write_bvh(tmp_path / "rest.bvh", [t_pose] * held + capture))
+    assert with_rest.meta["leading_frames_dropped"] == held
+    assert plain.meta["leading_frames_dropped"] == 0
+    assert with_rest.joints == pytest.approx(plain.joints, abs=1e-9)
+
+
+def test_a_fast_start_is_kept(tmp_path):
+    """A motion as fast from its first frame as later (a sprint: 15 cm per frame) is no jump."""
+    clip = load_mocap(write_bvh(tmp_path / "fast.bvh", _smooth_rows(30, root_step=0.15)))
+    assert clip.meta["leading_frames_dropped"] == 0
+
+
 # Other exporters' joint names for the test skeleton's joints (3ds Max Biped, MotionBuilder
 # HumanIK with its character prefix).
 _BIPED = {"Hips": "Bip01 Pelvis", "Spine": "Bip01 Spine", "Neck": "Bip01 Neck",

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -165,6 +166,10 @@ def _multiview_clips(folder: Path, cfg: MaterialConfig) -> list[Clip]:
 def _mocap_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:
     start = time.perf_counter()
     motion = load_mocap(path, target_fps=cfg.fps)
+    if motion.meta.get("leading_frames_dropped"):
+        print(f"benchmark: {path.name}: its first {motion.meta['leading_frames_dropped']} "
+              "frame(s) hold a rest pose joined to the motion by a jump; left out",
+              file=sys.stderr, flush=True)
     clip = mocap_clip(motion, cfg, name=path.stem)
     clip.timings_s["load"] = time.perf_counter() - start - clip.timings_s["simulate"]
     return [clip]

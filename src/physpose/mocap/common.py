@@ -26,6 +26,13 @@ MIN_STILL_FRAMES = 3     # fewer still-foot samples than this: floor from FLOOR_
 FLOOR_PERCENTILE = 5.0   # % of frames whose lowest sole point lies below that fallback floor
 HEIGHT_PERCENTILE = 95.0  # body height: this percentile of the head-top height ...
 STANDING_FOOT_HEIGHT = 0.03  # m, ... over frames where both feet are at most this high
+# A leading rest or calibration pose (e.g. a T-pose in frame 0), held still, joined to the motion
+# by a jump: a first-second step whose mean point displacement is at least START_JUMP_MIN and
+# START_JUMP_RATIO times the largest step of the second after it. The frames before it are
+# dropped.
+START_JUMP_MIN = 0.1     # m
+START_JUMP_RATIO = 4.0
+START_JUMP_WITHIN = 1.0  # s
 # Rigid segments (constant length in every clip): thigh, shin, heel, upper arm, forearm, pelvis.
 BONES: tuple[tuple[str, str], ...] = tuple(
     (f"{s}_{a}", f"{s}_{b}") for s in SIDES for a, b in (
@@ -44,6 +51,7 @@ class SkeletonMotion:
     head_rot: np.ndarray            # (T, 3, 3) columns: face forward, left, up (along the head)
     hand_rot: np.ndarray            # (T, 2, 3, 3) [l, r]; columns: wrist->fingers, ->thumb, x cross y
     up: np.ndarray                  # (3,) the file's world up axis
+    leading_frames_dropped: int = 0  # file frames left out before `times` (`leading_jump`)
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,7 +67,8 @@ class MocapClip:
     hand_rot: np.ndarray            # (T, 2, 3, 3) [l, r]; columns: wrist->fingers, ->thumb, x cross y
     source_fps: float               # Hz, the file's own rate
     floor_offset: float             # m, file floor height (z up) that was subtracted
-    meta: dict = field(default_factory=dict)  # source_frames, source_duration (s)
+    meta: dict = field(default_factory=dict)  # source_frames, source_duration (s),
+    #                                           leading_frames_dropped (`leading_jump`)
 
     def __post_init__(self) -> None:
         t = self.joints.shape[0]
@@ -158,7 +167,30 @@ def finish_clip(motion: SkeletonMotion, target_fps: float | None) -> MocapClip:
     return MocapClip(name=motion.name, source=motion.source, fps=fps, joints=joints,
                      head_top=head_top, head_rot=head_rot, hand_rot=hand_rot,
                      source_fps=source_fps, floor_offset=floor,
-                     meta={"source_frames": len(times), "source_duration": float(times[-1])})
+                     meta={"source_frames": len(times), "source_duration": float(times[-1]),
+                           "leading_frames_dropped": motion.leading_frames_dropped})
+
+
+def leading_jump(positions: np.ndarray, times: np.ndarray) -> int:
+    """How many leading frames a jump separates from the rest (0: none; see START_JUMP_MIN).
+
+    Many exports start with the skeleton's rest pose (a T-pose) for retargeting, one frame
+    before the capture: no body moves like that, and a detector simulated on it would see a
+    different person in frame 0.
+
+    positions: (T, P, 3) m, the skeleton's joints; times: (T,) s.
+    """
+    step = np.linalg.norm(np.diff(positions, axis=0), axis=-1).mean(axis=1)  # (T-1,) m
+    times = times - times[0]
+    for k in np.flatnonzero(times[1:] <= START_JUMP_WITHIN):
+        if step[k] < START_JUMP_MIN:
+            continue
+        if k and step[:k].max() > START_JUMP_MIN / 4:
+            return 0    # the frames before it move: not a held pose, the motion itself jumps
+        after = step[k + 1:][times[k + 2:] <= times[k + 1] + START_JUMP_WITHIN]
+        if len(after) >= 3 and step[k] > START_JUMP_RATIO * after.max():
+            return int(k + 1)
+    return 0
 
 
 def estimate_floor(points: dict[str, np.ndarray], times: np.ndarray) -> float:

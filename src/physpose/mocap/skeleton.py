@@ -24,7 +24,7 @@ import re
 import numpy as np
 
 from physpose.errors import PhysposeError
-from physpose.mocap.common import SIDES, SkeletonMotion, infer_up_axis
+from physpose.mocap.common import SIDES, SkeletonMotion, infer_up_axis, leading_jump
 from physpose.mocap.rotations import frame_from_axes
 
 SOLE_BELOW_BALL = 0.045   # m; CMU ASF clips: ball joint 4.3-6.4 cm above the lab floor in stance
@@ -149,7 +149,10 @@ def motion_from_tree(name: str, source: str, times: np.ndarray, names: list[str]
 
     times: (T,) s; pos: (T, N, 3) m; rot: (T, N, 3, 3) global node rotations;
     rest_pos: (N, 3) node positions with all rotations zero.
+    A rest pose held before the motion and joined to it by a jump is left out (`leading_jump`).
     """
+    dropped = leading_jump(pos, times)
+    times, pos, rot = times[dropped:], pos[dropped:], rot[dropped:]
     norm = [_normalise(n) for n in names]
     heads = [k for k, n in enumerate(norm) if n == "head"] or [
         k for k, n in enumerate(norm) if n.endswith("head") and "end" not in n]
@@ -219,7 +222,8 @@ def motion_from_tree(name: str, source: str, times: np.ndarray, names: list[str]
             thumb = np.einsum("tij,j->ti", rot[:, wrist], rest_fwd)
         hand_rot.append(frame_from_axes(along, thumb))
     return SkeletonMotion(name=name, source=source, times=times, points=points,
-                          head_rot=head_rot, hand_rot=np.stack(hand_rot, axis=1), up=up)
+                          head_rot=head_rot, hand_rot=np.stack(hand_rot, axis=1), up=up,
+                          leading_frames_dropped=dropped)
 
 
 def _path(parents: list[int], top: int, k: int) -> list[int]:
