@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from physpose.subject import (Follower, covers, mask_outside, seed_regions, subject_regions,
+from physpose.subject import (Follower, covers, mask_outside, seed_regions, square_crop,
+                              subject_regions, tiles,
                               subject_tracks)
 
 FPS = 25.0
@@ -84,3 +85,25 @@ def test_a_named_person_is_found_by_a_point_on_them_and_followed():
     before = width(follow.region())
     follow.update(None)
     assert width(follow.region()) > before
+
+
+def test_tiles_cover_the_image_at_every_size():
+    boxes = tiles((1280, 720))
+    for size in (0.6, 0.4, 0.25):
+        side = size * 720
+        group = [b for b in boxes if np.isclose(b[2] - b[0], side)]
+        covered = np.zeros((720, 1280), bool)
+        for x0, y0, x1, y1 in np.round(group).astype(int):
+            assert 0 <= x0 and x1 <= 1280 and 0 <= y0 and y1 <= 720
+            covered[y0:y1, x0:x1] = True
+        assert covered.all()
+
+
+def test_square_crop_maps_pixels_back_and_pads_outside_the_image():
+    image = np.zeros((100, 200, 3), np.uint8)
+    image[40, 190] = 255                      # a bright pixel near the right edge
+    crop, origin, scale = square_crop(image, np.array([170.0, 30.0, 210.0, 50.0]), 80)
+    assert crop.shape == (80, 80, 3) and scale == 0.5      # a 40 px square scaled up twice
+    y, x = np.unravel_index(np.argmax(crop[..., 0]), crop.shape[:2])
+    assert np.allclose(np.array([x, y]) * scale + origin, [190, 40], atol=1.0)
+    assert (crop[:, -10:] == 128).all()       # beyond the image's right edge: grey

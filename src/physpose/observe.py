@@ -19,6 +19,14 @@ than the one physpose would pick names them by a point on them in the first anal
 (`person`, `--person X,Y`): the detector then only ever sees the image around that person's
 last detection (subject.Follower), and the automatic second look is skipped.
 
+A person too small for MediaPipe's detector, which sees the whole frame shrunk to a couple of
+hundred pixels (under about a third of the image height), is found in none or few frames. When
+the first look finds the person in fewer than `min_detection_fraction` of the frames, observe
+searches square tiles of a few frames for them (`subject.tiles`) and follows the one found in a
+square crop around their last detection, scaled to CROP_SIZE (`detect_in_crop`); landmarks and
+masks are mapped back to the whole image. The same crops serve a `person` too small to be found
+in the whole frame.
+
 Frames without a detection are flagged; gaps of at most `max_gap_frames` between two detected
 frames are filled by linear interpolation (positions, confidences, world landmarks and masks)
 and flagged `interpolated`. Results are cached
@@ -43,9 +51,12 @@ from physpose.diagnostics import person_jumps
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
 from physpose.observations import Observations
-from physpose.subject import Follower, covers, mask_outside, seed_regions, subject_regions
+from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
+                              square_crop, subject_regions, tiles)
 
 OBSERVE_VERSION = 2  # bump when a change alters what observe() returns for the same input
+CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
+MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 _log = logging.getLogger(__name__)
 
 
@@ -154,6 +165,29 @@ def downsample_mask(prob: np.ndarray, long_side: int) -> np.ndarray:
     return np.round(np.clip(small, 0.0, 1.0) * 255).astype(np.uint8)
 
 
+def detect_in_crop(detector: PoseDetector, image: np.ndarray, box: np.ndarray,
+                   mask_size: tuple[int, int] | None = None) -> FrameDetection | None:
+    """Detect in the square crop around box [x0, y0, x1, y1] (subject.square_crop), scaled to
+    CROP_SIZE; landmarks in image pixels, the mask (if any) on the image's (h, w) mask grid
+    `mask_size`, zero outside the crop."""
+    crop, origin, scale = square_crop(image, box, CROP_SIZE)
+    found = detector.detect(crop)
+    if found is None:
+        return None
+    kp = found.keypoints2d.copy()
+    kp[:, :2] = kp[:, :2] * scale + origin
+    mask = None
+    if found.mask is not None and mask_size is not None:
+        height, width = image.shape[:2]
+        mh, mw = mask_size
+        sx, sy = mw / width, mh / height
+        per_px = CROP_SIZE * scale / found.mask.shape[1]   # image px per crop-mask px
+        warp = np.array([[per_px * sx, 0.0, origin[0] * sx], [0.0, per_px * sy, origin[1] * sy]])
+        mask = cv2.warpAffine(found.mask, warp, (mw, mh), flags=cv2.INTER_AREA,
+                              borderValue=0)
+    return FrameDetection(keypoints2d=kp, world_landmarks=found.world_landmarks, mask=mask)
+
+
 def fill_gaps(values: np.ndarray, detected: np.ndarray, max_gap: int) -> tuple[np.ndarray, np.ndarray]:
     """Linearly interpolate runs of at most `max_gap` undetected frames between detected ones.
 
@@ -192,9 +226,21 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
                     config=dataclasses.replace(cfg, use_cache=True))
     if cfg.use_cache and (hit := cache.get(key)) is not None:
         return _from_arrays(hit, source=str(video))
-    obs = _detect_all(info, plan, cfg, progress)
+    obs = _detect_all(info, plan, cfg, progress, check=False)
+    zoomed = False
+    if obs.detected.sum() < cfg.min_detection_fraction * obs.num_frames and cfg.person is None:
+        # Perhaps the person is too small for the detector's view of the whole frame: look
+        # for them in tiles of a few frames, then follow them in a crop.
+        seed = _find_small_person(info, plan, cfg)
+        if seed is not None:
+            _log.warning("%s: the person is small in the image; following them in a crop",
+                         video)
+            again = _detect_all(info, plan, cfg, progress, zoom=seed, check=False)
+            if again.detected.sum() > obs.detected.sum():
+                obs, zoomed = again, True
+    _check_detection_rate(info.path, int(obs.detected.sum()), obs.num_frames, cfg)
     jumps = person_jumps(obs.keypoints2d, obs.detected, obs.fps)
-    if jumps and cfg.person is None:
+    if jumps and cfg.person is None and not zoomed:
         # The tracker lost its person and took another: look again, with every frame masked
         # to where the subject (the longest track and those continuing it) can be.
         _log.warning("%s: the detected person jumps at frames %s; looking again for one "
@@ -211,18 +257,22 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
 
 
 def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig,
-                progress: bool, regions: np.ndarray | None = None, check: bool = True
-                ) -> Observations:
+                progress: bool, regions: np.ndarray | None = None, check: bool = True,
+                zoom: Follower | None = None) -> Observations:
     """Detect in every planned frame; regions (T, 4): image boxes outside which each frame is
-    blacked out first (subject.py). check: fail when too few frames have a detection."""
+    blacked out first (subject.py); zoom: follow the person in a crop around their last
+    detection, starting from this follower. check: fail when too few frames have a
+    detection."""
     t = len(plan.indices)
     kp = np.zeros((t, NUM_LANDMARKS, 3))
     world = np.zeros((t, NUM_LANDMARKS, 3))
     mh, mw = mask_shape(info.image_size, cfg.mask_long_side)
     masks = np.zeros((t, mh, mw), np.uint8) if cfg.mask_long_side > 0 else None
     detected = np.zeros(t, bool)
-    follower = _follower(info, plan, cfg) if regions is None and cfg.person is not None \
-        else None
+    follower = zoom
+    if follower is None and regions is None and cfg.person is not None:
+        follower, zoomed = _follower(info, plan, cfg)
+        zoom = follower if zoomed else None
     read = 0
     bar = tqdm(total=t, unit="frame", desc=f"observe {info.path.name}", disable=not progress,
                leave=False)
@@ -230,11 +280,15 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
         for i, (_, image) in enumerate(videolib.read_frames(info, plan.indices)):
             read = i + 1
             bar.update()
-            if regions is not None:
-                image = mask_outside(image, regions[i])
+            if zoom is not None:
+                found = detect_in_crop(detector, image, zoom.region(),
+                                       (mh, mw) if masks is not None else None)
+            elif regions is not None:
+                found = detector.detect(mask_outside(image, regions[i]))
             elif follower is not None:
-                image = mask_outside(image, follower.region())
-            found = detector.detect(image)
+                found = detector.detect(mask_outside(image, follower.region()))
+            else:
+                found = detector.detect(image)
             if follower is not None:
                 follower.update(None if found is None else found.keypoints2d)
             if found is None:
@@ -246,7 +300,7 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
     if read < t:  # the file ended a little early (within the container's counting slack)
         kp, world, detected = kp[:read], world[:read], detected[:read]
         masks = None if masks is None else masks[:read]
-    if check:
+    if check or read == 0:
         _check_detection_rate(info.path, int(detected.sum()), read, cfg)
     kp, interpolated = fill_gaps(kp, detected, cfg.max_gap_frames)
     world, _ = fill_gaps(world, detected, cfg.max_gap_frames)
@@ -260,9 +314,11 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
 
 
 def _follower(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig
-              ) -> Follower:
+              ) -> tuple[Follower, bool]:
     """Find the person at `cfg.person` in the first planned frame (the whole image first, then
-    smaller and smaller boxes around the point) and follow them from there."""
+    smaller and smaller boxes around the point; then those boxes cropped and scaled up, for a
+    person too small to be found otherwise) and follow them from there. Returns the follower
+    and whether to follow in a crop (zoomed)."""
     x, y = cfg.person
     width, height = info.image_size
     first = f"the first analysed frame ({plan.timestamps[0]:.2f} s)"
@@ -275,15 +331,47 @@ def _follower(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveCo
         _, image = next(frames)
     finally:
         frames.close()
+    regions = seed_regions((x, y), info.image_size)
     with PoseDetector(cfg, static=True) as detector:
-        for region in seed_regions((x, y), info.image_size):
+        for region in regions:
             found = detector.detect(mask_outside(image, region))
             if found is not None and covers(found.keypoints2d, (x, y)):
-                return Follower(found.keypoints2d, plan.fps, info.image_size)
+                return Follower(found.keypoints2d, plan.fps, info.image_size), False
+        for region in regions[1:]:
+            found = detect_in_crop(detector, image, region)
+            if found is not None and covers(found.keypoints2d, (x, y)):
+                return Follower(found.keypoints2d, plan.fps, info.image_size), True
     raise PhysposeError(f"no person found at --person {x:g},{y:g} in {first}",
                         path=info.path, frame=int(plan.indices[0]),
                         remedy="give a pixel on the person's body there (origin at the top "
                                "left), or a --start at which the whole person is in view")
+
+
+SEARCH_FRAMES = 4   # frames searched, spread over the clip, for a person the first look missed
+
+
+def _find_small_person(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig
+                       ) -> Follower | None:
+    """Look for a person in square tiles (subject.tiles) of up to SEARCH_FRAMES frames spread
+    over the clip; the first frame with one gives the follower: the tallest detection among
+    those with a mean landmark visibility of at least MIN_SEED_VISIBILITY, detected again in a
+    crop around itself so that the whole body is seen."""
+    picks = np.unique(np.linspace(0, len(plan.indices) - 1, SEARCH_FRAMES).round().astype(int))
+    with PoseDetector(cfg, static=True) as detector:
+        for _, image in videolib.read_frames(info, plan.indices[picks]):
+            hits = []
+            for tile in tiles(info.image_size):
+                found = detect_in_crop(detector, image, tile)
+                box = None if found is None else detection_box(found.keypoints2d)
+                if box is not None and found.keypoints2d[:, 2].mean() >= MIN_SEED_VISIBILITY:
+                    hits.append((float(box[3] - box[1]), box))
+            for _, box in sorted(hits, key=lambda h: -h[0]):
+                grow = 0.5 * np.linalg.norm(box[2:] - box[:2])
+                found = detect_in_crop(detector, image, np.concatenate([box[:2] - grow,
+                                                                        box[2:] + grow]))
+                if found is not None and detection_box(found.keypoints2d) is not None:
+                    return Follower(found.keypoints2d, plan.fps, info.image_size)
+    return None
 
 
 def _check_detection_rate(path: Path, found: int, total: int, cfg: ObserveConfig) -> None:

@@ -14,10 +14,16 @@ A user can also name the person (`ObserveConfig.person`, `--person X,Y`): a poin
 the first analysed frame. `seed_regions` are the image boxes tried there, `covers` tells whether
 a detection is the person at that point, and `Follower` gives each next frame's box around the
 person's last detection, so the detector only ever sees that person.
+
+A person too small in the image for MediaPipe's detector (which sees the whole frame shrunk to
+a couple of hundred pixels) is found in `tiles` of the frame instead, and then followed in a
+square crop around their last detection (`square_crop`), scaled up, so they fill the detector's
+view.
 """
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from physpose.diagnostics import (JUMP_SIZES, image_box_corners, image_boxes,
@@ -100,6 +106,44 @@ def mask_outside(image: np.ndarray, box: np.ndarray) -> np.ndarray:
     out[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)] = \
         image[max(y0, 0):max(y1, 0), max(x0, 0):max(x1, 0)]
     return out
+
+
+TILE_SIZES = (0.6, 0.4, 0.25)   # sides of the square tiles searched for a small person, in
+                                # image heights; tiles overlap by half a side
+
+
+def tiles(image_size: tuple[int, int]) -> list[np.ndarray]:
+    """Square boxes [x0, y0, x1, y1] covering the image at each of TILE_SIZES, largest first."""
+    width, height = image_size
+    boxes = []
+    for size in TILE_SIZES:
+        side = size * min(width, height)
+        xs = np.linspace(0.0, width - side, max(1, int(np.ceil((width - side) / (side / 2)))
+                                                 + 1))
+        ys = np.linspace(0.0, height - side, max(1, int(np.ceil((height - side) / (side / 2)))
+                                                  + 1))
+        boxes += [np.array([x, y, x + side, y + side]) for y in ys for x in xs]
+    return boxes
+
+
+def square_crop(image: np.ndarray, box: np.ndarray, size: int
+                ) -> tuple[np.ndarray, np.ndarray, float]:
+    """The square around box [x0, y0, x1, y1] (its longer side, centred; the image padded with
+    grey where it reaches outside) resized to size x size px. Returns the crop, its top-left
+    corner in the image (x, y) and the image pixels per crop pixel."""
+    centre = 0.5 * (box[:2] + box[2:])
+    side = max(float(np.max(box[2:] - box[:2])), 8.0)
+    x0, y0 = np.floor(centre - side / 2).astype(int)
+    n = int(np.ceil(side))
+    height, width = image.shape[:2]
+    pad = max(0, -x0, -y0, x0 + n - width, y0 + n - height)
+    padded = cv2.copyMakeBorder(image, pad, pad, pad, pad, cv2.BORDER_CONSTANT,
+                                value=(128, 128, 128)) if pad else image
+    crop = padded[y0 + pad:y0 + pad + n, x0 + pad:x0 + pad + n]
+    scale = n / size
+    resized = cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA if scale > 1
+                         else cv2.INTER_LINEAR)
+    return resized, np.array([x0, y0], dtype=float), scale
 
 
 SEED_HALF_SIZES = (0.5, 0.3, 0.18)   # half-sides of the boxes tried around a --person point,
