@@ -20,12 +20,14 @@ than the one physpose would pick names them by a point on them in the first anal
 last detection (subject.Follower), and the automatic second look is skipped.
 
 A person too small for MediaPipe's detector, which sees the whole frame shrunk to a couple of
-hundred pixels (under about a third of the image height), is found in none or few frames. When
+hundred pixels (under about a third of the image height), is found in none or some frames. When
 the first look finds the person in fewer than `min_detection_fraction` of the frames, observe
 searches square tiles of a few frames for them (`subject.tiles`) and follows the one found in a
 square crop around their last detection, scaled to CROP_SIZE (`detect_in_crop`); landmarks and
-masks are mapped back to the whole image. The same crops serve a `person` too small to be found
-in the whole frame.
+masks are mapped back to the whole image. A person the first look found, but small (SMALL_PERSON)
+and in fewer than PATCHY of the frames, is followed in the same crops from their first
+detection. The crop pass is kept where it finds the person in more frames. The same crops serve
+a `person` too small to be found in the whole frame.
 
 Frames without a detection are flagged; gaps of at most `max_gap_frames` between two detected
 frames are filled by linear interpolation (positions, confidences, world landmarks and masks)
@@ -47,14 +49,14 @@ from tqdm import tqdm
 
 from physpose import video as videolib
 from physpose.cache import Cache, stage_key
-from physpose.diagnostics import person_jumps
+from physpose.diagnostics import image_box_corners, person_jumps
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
 from physpose.observations import Observations
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 2  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 3  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 _log = logging.getLogger(__name__)
@@ -227,17 +229,19 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
     if cfg.use_cache and (hit := cache.get(key)) is not None:
         return _from_arrays(hit, source=str(video))
     obs = _detect_all(info, plan, cfg, progress, check=False)
-    zoomed = False
-    if obs.detected.sum() < cfg.min_detection_fraction * obs.num_frames and cfg.person is None:
+    zoomed, seed = False, None
+    if cfg.person is None and obs.detected.sum() < cfg.min_detection_fraction * obs.num_frames:
         # Perhaps the person is too small for the detector's view of the whole frame: look
         # for them in tiles of a few frames, then follow them in a crop.
         seed = _find_small_person(info, plan, cfg)
-        if seed is not None:
-            _log.warning("%s: the person is small in the image; following them in a crop",
-                         video)
-            again = _detect_all(info, plan, cfg, progress, zoom=seed, check=False)
-            if again.detected.sum() > obs.detected.sum():
-                obs, zoomed = again, True
+    elif cfg.person is None and _small_and_patchy(obs, info.image_size):
+        # Found, but small and lost now and then: follow the same person in a crop.
+        seed = Follower(obs.keypoints2d[np.argmax(obs.detected)], plan.fps, info.image_size)
+    if seed is not None:
+        _log.warning("%s: the person is small in the image; following them in a crop", video)
+        again = _detect_all(info, plan, cfg, progress, zoom=seed, check=False)
+        if again.detected.sum() > obs.detected.sum():
+            obs, zoomed = again, True
     _check_detection_rate(info.path, int(obs.detected.sum()), obs.num_frames, cfg)
     jumps = person_jumps(obs.keypoints2d, obs.detected, obs.fps)
     if jumps and cfg.person is None and not zoomed:
@@ -348,6 +352,17 @@ def _follower(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveCo
 
 
 SEARCH_FRAMES = 4   # frames searched, spread over the clip, for a person the first look missed
+SMALL_PERSON = 0.4  # a person whose detections' median box height is under this fraction of
+PATCHY = 0.9        # the image height, found in fewer than this fraction of the frames, is
+                    # looked for again in a crop
+
+
+def _small_and_patchy(obs: Observations, image_size: tuple[int, int]) -> bool:
+    """Whether the first look found a small person (SMALL_PERSON) in only some frames (PATCHY)."""
+    lo, hi, ok = image_box_corners(obs.keypoints2d[obs.detected])
+    if obs.detected.mean() >= PATCHY or not ok.any():
+        return False
+    return float(np.median(hi[ok, 1] - lo[ok, 1])) < SMALL_PERSON * image_size[1]
 
 
 def _find_small_person(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig
