@@ -14,20 +14,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from physpose.errors import PhysposeError
+from physpose.pinhole import focal_from_fov, intrinsics  # noqa: F401 (the fit's camera)
 
 UP_LEVEL = np.array([0.0, -1.0, 0.0])  # the up direction of a level camera, camera axes
-
-
-def focal_from_fov(image_size: tuple[int, int], diagonal_fov_deg: float) -> float:
-    """Focal length (px) giving the field of view across the image diagonal."""
-    half_diagonal = 0.5 * float(np.hypot(*image_size))
-    return half_diagonal / float(np.tan(np.radians(diagonal_fov_deg) / 2))
-
-
-def intrinsics(image_size: tuple[int, int], focal: float) -> np.ndarray:
-    """(3, 3) K with square pixels and the principal point at the image centre."""
-    width, height = image_size
-    return np.array([[focal, 0.0, width / 2.0], [0.0, focal, height / 2.0], [0.0, 0.0, 1.0]])
 
 
 def check_intrinsics(K: np.ndarray, source: str) -> np.ndarray:

@@ -11,6 +11,7 @@ import dataclasses
 from dataclasses import dataclass
 
 from physpose.errors import PhysposeError
+from physpose.pinhole import DEFAULT_DIAGONAL_FOV_DEG
 
 VARIANT_NAMES: tuple[str, ...] = ("S", "SO", "SO+G", "SO+T", "SO+GT")
 
@@ -20,7 +21,7 @@ class CameraConfig:
     """Intrinsics when the observations carry none: square pixels, principal point at the
     image centre, focal length from a diagonal field of view, optionally refined (+O)."""
 
-    diagonal_fov_deg: float = 55.0   # prior field of view across the image diagonal
+    diagonal_fov_deg: float = DEFAULT_DIAGONAL_FOV_DEG  # prior field of view, image diagonal
     refine_focal: bool = False       # optimise the focal length with the poses (weakly observable)
     focal_log_sigma: float = 0.25    # prior sigma of log(focal) when refined
 
