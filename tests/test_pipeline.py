@@ -71,7 +71,8 @@ def test_reconstruct_writes_the_contract(tmp_path):
     # A simulated motion is one the body can make: almost no unexplained root force.
     assert loaded.meta["dynamics"]["reference"]["root_residual_median"] < 0.05
     # A clean simulated clip raises none of the input warnings (physpose.diagnostics).
-    assert loaded.meta["diagnostics"] == {"person_jumps": [], "hidden_feet": 0.0, "raised": [],
+    assert loaded.meta["diagnostics"] == {"camera_motion": None, "person_jumps": [],
+                                          "hidden_feet": 0.0, "raised": [],
                                           "supports": [], "seated": [], "seats": [],
                                           "invalid_windows": []}
     resolved = json.loads((tmp_path / CONFIG_FILE).read_text())

@@ -152,6 +152,16 @@ def hidden_feet_message(share: float) -> str | None:
             "person, feet included")
 
 
+def camera_message(kind: str | None) -> str | None:
+    """A warning where the camera moved along while filming (camera_motion.py), or None."""
+    if kind != "moving":
+        return None
+    return ("input: the camera moves (not only turns) while filming: physpose assumes a static "
+            "camera, so the motion is reconstructed as the camera saw it; a person the camera "
+            "follows seems to walk or run on the spot, and the physics, which cannot, strays "
+            "from them and restarts. Film from a fixed point (turning to follow is fine)")
+
+
 def raised_message(runs: list[tuple[int, int, float]], fps: float, supported: bool = True
                    ) -> str | None:
     """A warning on `raised_runs`, or None; `supported`: whether a support box was added."""
@@ -192,7 +202,8 @@ def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
 
 def warning_lines(found: dict, fps: float) -> list[str]:
     """The warnings of a reconstruction's meta ``diagnostics`` (as the pipeline stores them)."""
-    lines = [jumps_message(found.get("person_jumps", []), fps),
+    lines = [camera_message(found.get("camera_motion")),
+             jumps_message(found.get("person_jumps", []), fps),
              hidden_feet_message(found.get("hidden_feet", 0.0)),
              raised_message([tuple(r) for r in found.get("raised", [])], fps,
                             supported=bool(found.get("supports"))),

@@ -38,6 +38,12 @@ class Observations:
     masks: np.ndarray | None = None            # (T, h, w) uint8 person probability x 255
     camera_K: np.ndarray | None = None         # (3, 3) intrinsics, when the camera is calibrated
     frame_indices: np.ndarray | None = None    # (T,) index of each frame in the source video
+    # Where the camera turned while filming (physpose.camera_motion): keypoints2d and
+    # world_landmarks are then in the reference camera's image and axes, and homographies map
+    # the reference image's pixels to each frame's own (T, 3, 3). camera_motion: "static",
+    # "turning" or "moving" (turns and moves along: not compensated), None where not measured.
+    homographies: np.ndarray | None = None
+    camera_motion: str | None = None
 
     def __post_init__(self) -> None:
         validate(self)
@@ -67,7 +73,8 @@ class Observations:
             "detected": self.detected,
             "interpolated": self.interpolated,
         }
-        for key in ("world_landmarks", "masks", "camera_K", "frame_indices"):
+        for key in ("world_landmarks", "masks", "camera_K", "frame_indices", "homographies",
+                    "camera_motion"):
             value = getattr(self, key)
             if value is not None:
                 arrays[key] = value
@@ -97,7 +104,27 @@ class Observations:
             masks=d.get("masks"),
             camera_K=d.get("camera_K"),
             frame_indices=d.get("frame_indices"),
+            homographies=d.get("homographies"),
+            camera_motion=None if "camera_motion" not in d else str(d["camera_motion"]),
         )
+
+    def frame_keypoints(self) -> np.ndarray:
+        """keypoints2d (T, 33, 3) in each frame's own pixels: the same unless the camera turned
+        (then keypoints2d are in the reference camera's image)."""
+        if self.homographies is None:
+            return self.keypoints2d
+        return map_keypoints(self.keypoints2d, self.homographies, self.valid)
+
+
+def map_keypoints(keypoints2d: np.ndarray, homographies: np.ndarray, valid: np.ndarray
+                  ) -> np.ndarray:
+    """(T, 33, 3) keypoints with the pixels of the valid frames mapped by (T, 3, 3)
+    homographies; confidences kept, other frames zero."""
+    xy = np.concatenate([keypoints2d[..., :2], np.ones(keypoints2d.shape[:-1] + (1,))], axis=-1)
+    mapped = np.einsum("tij,tnj->tni", homographies, xy)
+    out = np.array(keypoints2d, dtype=float)
+    out[..., :2] = np.where(valid[:, None, None], mapped[..., :2] / mapped[..., 2:], 0.0)
+    return out
 
 
 def validate(obs: Observations) -> None:
@@ -138,3 +165,7 @@ def validate(obs: Observations) -> None:
         fail(f"masks has shape {np.asarray(obs.masks).shape}, expected ({t}, h, w)")
     if obs.camera_K is not None and np.asarray(obs.camera_K).shape != (3, 3):
         fail(f"camera_K has shape {np.asarray(obs.camera_K).shape}, expected (3, 3)")
+    if obs.homographies is not None and np.asarray(obs.homographies).shape != (t, 3, 3):
+        fail(f"homographies has shape {np.asarray(obs.homographies).shape}, expected ({t}, 3, 3)")
+    if obs.camera_motion not in (None, "static", "turning", "moving"):
+        fail(f"camera_motion {obs.camera_motion!r} is not static, turning or moving")

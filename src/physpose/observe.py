@@ -29,6 +29,12 @@ and in fewer than PATCHY of the frames, is followed in the same crops from their
 detection. The crop pass is kept where it finds the person in more frames. The same crops serve
 a `person` too small to be found in the whole frame.
 
+A camera that turns while filming (a pan or tilt to follow the person) is measured from the
+background (`camera_motion.py`) and the detections are mapped into the middle frame's camera
+(`stabilize`, on by default), so the later stages see a still camera; `Observations.homographies`
+maps back to each frame's pixels. A camera that also travels is only reported
+(`Observations.camera_motion` "moving").
+
 Frames without a detection are flagged; gaps of at most `max_gap_frames` between two detected
 frames are filled by linear interpolation (positions, confidences, world landmarks and masks)
 and flagged `interpolated`. Results are cached
@@ -49,6 +55,7 @@ from tqdm import tqdm
 
 from physpose import video as videolib
 from physpose.cache import Cache, stage_key
+from physpose.camera_motion import estimate_camera_motion, stabilize
 from physpose.diagnostics import image_box_corners, person_jumps
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
@@ -56,7 +63,7 @@ from physpose.observations import Observations
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 3  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 4  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 _log = logging.getLogger(__name__)
@@ -77,6 +84,7 @@ class ObserveConfig:
     end: float | None = None               # s, analysis stops before this (None: end of video)
     person: tuple[float, float] | None = None  # px (x, y): a point on the person to follow in
                                            # the first analysed frame (None: physpose picks)
+    stabilize: bool = True                 # map detections into one camera where it turns
     use_cache: bool = True                 # reuse a cached result for the same input and settings
 
     def __post_init__(self) -> None:
@@ -255,6 +263,13 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
         if len(left) < len(jumps) and again.detected.sum() >= cfg.min_detection_fraction \
                 * again.num_frames:
             obs = again
+    if cfg.stabilize:
+        motion = estimate_camera_motion(info, plan, obs)
+        obs = stabilize(obs, motion)
+        if motion.kind == "turning":
+            _log.warning("%s: the camera turns (up to %.1f degrees from the middle frame's "
+                         "view); the detections are mapped into that view", video,
+                         motion.turned_deg)
     if cfg.use_cache:
         cache.put(key, _to_arrays(obs))
     return obs
@@ -410,5 +425,7 @@ def _to_arrays(obs: Observations) -> dict[str, np.ndarray]:
 
 def _from_arrays(arrays: dict[str, np.ndarray], source: str) -> Observations:
     d = dict(arrays)
+    if "camera_motion" in d:
+        d["camera_motion"] = str(d["camera_motion"])
     return Observations(source=source, fps=float(d.pop("fps")),
                         image_size=tuple(int(v) for v in d.pop("image_size")), **d)

@@ -77,11 +77,12 @@ def _write(obs: Observations, frames, tmp: str, size: tuple[int, int], progress:
         if not writer.isOpened():
             raise PhysposeError("OpenCV cannot write an mp4v video here", path=tmp,
                                 remedy="pass --no-overlay, or check the folder is writable")
+        shown = obs.frame_keypoints()   # each frame's own pixels (a turning camera)
         for t in tqdm(range(obs.num_frames), desc="overlay", unit="frame", disable=not progress,
                       leave=False):
             image = next(frames)
             image = cv2.resize(image, size, interpolation=cv2.INTER_AREA)
-            draw_landmarks(image, obs.keypoints2d[t], scale=size[0] / width)
+            draw_landmarks(image, shown[t], scale=size[0] / width)
             stamp = f"t={obs.timestamps[t]:.2f}s"
             if obs.detected[t]:
                 _label(image, stamp, (255, 255, 255))

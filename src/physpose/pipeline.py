@@ -117,9 +117,11 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                             f"reconstruct motion from (need at least {MIN_FRAMES})",
                             path=obs.source, remedy="use a longer clip, or a wider --start/--end")
     lap("observe")
+    _warn(diagnostics.camera_message(obs.camera_motion))
     jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
     _warn(diagnostics.jumps_message(jumps, obs.fps))
-    hidden_feet = diagnostics.hidden_feet_share(obs.keypoints2d, obs.valid, obs.image_size)
+    hidden_feet = diagnostics.hidden_feet_share(obs.frame_keypoints(), obs.valid,
+                                                obs.image_size)
     _warn(diagnostics.hidden_feet_message(hidden_feet))
     kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
                          **({"log": stderr_log} if progress else {}))
@@ -145,7 +147,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     meta = dict(recon.meta)
     meta.update(timings_s=timings, dynamics={**phys.meta(), "timings": phys.timings},
                 physpose_version=__version__,
-                diagnostics={"person_jumps": jumps, "hidden_feet": hidden_feet,
+                diagnostics={"camera_motion": obs.camera_motion,
+                             "person_jumps": jumps, "hidden_feet": hidden_feet,
                              "raised": [list(r) for r in raised],
                              "supports": [[*b.center, *b.size] for b in boxes],
                              "seated": [list(r) for r in seated],

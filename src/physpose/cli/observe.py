@@ -37,7 +37,13 @@ class ObserveRun:
         n, found, filled = obs.num_frames, int(obs.detected.sum()), int(obs.interpolated.sum())
         return (f"{Path(obs.source).name}: {n} frames at {obs.fps:g} fps, person found in "
                 f"{found}/{n} ({100 * found / n:.1f}%), {filled} interpolated, "
-                f"{self.seconds:.1f} s\n" + "".join(f"  wrote {p}\n" for p in self.files))
+                f"{self.seconds:.1f} s{_camera_note(obs.camera_motion)}\n"
+                + "".join(f"  wrote {p}\n" for p in self.files))
+
+
+def _camera_note(kind: str | None) -> str:
+    return {"turning": ", camera turning (detections mapped into the middle frame's view)",
+            "moving": ", camera moving (not compensated)"}.get(kind or "", "")
 
 
 def run_observe(source: str | Path, out_dir: str | Path, cfg: ObserveConfig = ObserveConfig(),
@@ -82,6 +88,9 @@ def run_observe(source: str | Path, out_dir: str | Path, cfg: ObserveConfig = Ob
     return ObserveRun(observations=obs, files=files, seconds=time.perf_counter() - start)
 
 
+STATIC_CAMERA_HELP = ("take the camera as fixed: do not look for it turning (by default "
+                      "physpose measures a pan or tilt from the background and maps the "
+                      "detections into the middle frame's view)")
 PERSON_HELP = ("follow the person at this pixel (x,y, origin top left) of the first analysed "
                "frame, e.g. 1210,600, instead of the one physpose picks (the one the detector "
                "finds most); for videos with several people")
@@ -97,10 +106,11 @@ def image_point(text: str) -> tuple[float, float]:
 
 
 def config_from_args(args: argparse.Namespace) -> ObserveConfig:
-    """ObserveConfig from the shared --fps/--start/--end/--person/--no-cache options."""
+    """ObserveConfig from the shared --fps/--start/--end/--person/--static-camera/--no-cache
+    options."""
     return ObserveConfig(target_fps=ObserveConfig.target_fps if args.fps is None else args.fps,
                          start=args.start, end=args.end, person=args.person,
-                         use_cache=not args.no_cache)
+                         stabilize=not args.static_camera, use_cache=not args.no_cache)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -119,6 +129,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--start", type=float, default=None, metavar="S", help="start time, s")
     p.add_argument("--end", type=float, default=None, metavar="E", help="end time, s")
     p.add_argument("--person", type=image_point, default=None, metavar="X,Y", help=PERSON_HELP)
+    p.add_argument("--static-camera", action="store_true", help=STATIC_CAMERA_HELP)
     p.add_argument("--no-cache", action="store_true", help="recompute even if cached")
     p.add_argument("--no-overlay", action="store_true", help="skip the overlay video")
     p.set_defaults(func=_run)

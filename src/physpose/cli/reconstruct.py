@@ -14,7 +14,7 @@ import numpy as np
 from physpose import diagnostics
 from physpose.dynamics import PRESETS
 from physpose.dynamics.objective import TERMS, ObjectiveWeights
-from physpose.cli.observe import PERSON_HELP, image_point
+from physpose.cli.observe import PERSON_HELP, STATIC_CAMERA_HELP, image_point
 from physpose.errors import PhysposeError
 from physpose.export import FORMATS
 from physpose.keypoints_io import is_keypoints_file
@@ -86,6 +86,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--end", type=float, metavar="S",
                    help="analysis stops before this second (default: end of the video)")
     g.add_argument("--person", type=image_point, metavar="X,Y", help=PERSON_HELP)
+    g.add_argument("--static-camera", action="store_true", help=STATIC_CAMERA_HELP)
     g.add_argument("--camera", type=Path, metavar="FILE",
                    help="camera calibration: a Qualisys .qca.txt, or a JSON file "
                         '{"K": [[fx,0,cx],[0,fy,cy],[0,0,1]]} (default: intrinsics estimated)')
@@ -169,7 +170,8 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     observe = config.observe
     if args.fps is not None:
         observe = dataclasses.replace(observe, target_fps=args.fps)
-    observe = dataclasses.replace(observe, start=args.start, end=args.end, person=args.person)
+    observe = dataclasses.replace(observe, start=args.start, end=args.end, person=args.person,
+                                  stabilize=not args.static_camera)
     dynamics = config.dynamics
     if args.candidates is not None:
         dynamics = dataclasses.replace(dynamics, candidates=args.candidates)

@@ -44,6 +44,8 @@ class KinematicFit:
             meta={"source": obs.source, "variant": self.variant,
                   "frame_indices": None if obs.frame_indices is None
                   else np.asarray(obs.frame_indices).tolist(),
+                  "camera_homographies": None if obs.homographies is None
+                  else np.round(np.asarray(obs.homographies), 9).tolist(),
                   "kinematics": {"losses": self.losses, "timings": self.timings,
                                  "ground_estimated": self.ground_estimated,
                                  "shape": dataclasses.asdict(self.shape)}},

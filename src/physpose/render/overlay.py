@@ -21,6 +21,7 @@ from physpose import video as videolib
 from physpose.cache import atomic_path
 from physpose.errors import PhysposeError
 from physpose.reconstruction import Reconstruction
+from physpose.camera_motion import frame_cameras
 from physpose.render.bodymotion import BodyMotion, reconstruction_motion
 from physpose.render.draw import (draw_grid, draw_ground_disc, draw_skeleton, draw_solids,
                                   geom_samples, look_at)
@@ -67,6 +68,7 @@ class _Scene:
     edges: np.ndarray
     image_size: tuple[int, int]
     restarting: np.ndarray              # (T,) bool: within RESTART_SHOWN_S of a physics restart
+    cameras: np.ndarray                 # (T, 4, 4) world -> each frame's camera (a turning one)
 
 
 def _scene(rec: Reconstruction, image_size: tuple[int, int]) -> _Scene:
@@ -79,7 +81,16 @@ def _scene(rec: Reconstruction, image_size: tuple[int, int]) -> _Scene:
         contacts={m: foot_contacts(f[..., 2]) for m, f in feet.items()},
         feet_xy={m: f[..., :2] for m, f in feet.items()},
         edges=edge_indices(rec.joint_names), image_size=image_size,
-        restarting=_restarting(rec))
+        restarting=_restarting(rec), cameras=_frame_cameras(rec))
+
+
+def _frame_cameras(rec: Reconstruction) -> np.ndarray:
+    """(T, 4, 4) the camera of each frame: camera_T_world2cam, turned where the camera turned
+    while filming (meta camera_homographies, camera_motion.py)."""
+    turned = rec.meta.get("camera_homographies")
+    if turned is None:
+        return np.repeat(rec.camera_T_world2cam[None], rec.num_frames, axis=0)
+    return frame_cameras(np.asarray(turned, dtype=float), rec.camera_K, rec.camera_T_world2cam)
 
 
 def _restarting(rec: Reconstruction) -> np.ndarray:
@@ -115,7 +126,7 @@ def _video_panel(scene: _Scene, frame: np.ndarray | None, t: int, cfg: OverlayCo
     else:
         image = cv2.resize(frame, (round(w * scale), cfg.height), interpolation=cv2.INTER_AREA)
     k = np.diag([scale, scale, 1.0]) @ scene.rec.camera_K
-    _draw_motions(scene, image, k, scene.rec.camera_T_world2cam, t, cfg.solids)
+    _draw_motions(scene, image, k, scene.cameras[t], t, cfg.solids)
     return image
 
 
