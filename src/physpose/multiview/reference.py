@@ -132,7 +132,9 @@ def build_multiview_reference(folder: str | Path, cfg: ReferenceConfig = Referen
                               progress: bool = False) -> MultiviewReference:
     """Observe every view of `folder`, triangulate the 33 landmarks and return the reference."""
     files = find_multiview_files(folder)
-    views = tuple(observe(v, cfg.observe, progress=progress) for v in files.videos)
+    # Calibrated views are still by definition: their detections stay in their own pixels.
+    still = dataclasses.replace(cfg.observe, stabilize=False)
+    views = tuple(observe(v, still, progress=progress) for v in files.videos)
     cameras = tuple(cam.for_image_size(*obs.image_size, source=video)
                     for cam, obs, video in zip(files.cameras, views, files.videos))
     views = _align_frames(views, files.videos)
