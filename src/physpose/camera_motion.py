@@ -13,8 +13,8 @@ map back (reference pixels -> each frame's pixels) for drawing on the video.
 
 The focal length is found from the homographies where the camera turns far enough
 (K^-1 H K must be a rotation: self-calibration with square pixels and the principal point at
-the image centre); it only serves to turn MediaPipe's camera-aligned world landmarks into the
-reference camera's axes.
+the image centre); it turns MediaPipe's camera-aligned world landmarks into the reference
+camera's axes and becomes the observations' intrinsics where they have none.
 
 A camera that also moves along (a tracking or dolly shot) shows parallax that no homography
 explains; then the fit's rotations are not rotations and nothing is changed (`CameraMotion.kind`
@@ -47,7 +47,8 @@ MIN_CALIBRATION_DEG = 5.0   # the focal length is trusted from turns at least th
 class CameraMotion:
     """How the camera turned. homographies (T, 3, 3): reference-image pixels -> frame t's
     pixels (identity at the reference frame); rotations (T, 3, 3): directions in the reference
-    camera -> frame t's camera; kind: "static", "turning" or "moving" (turns and moves)."""
+    camera -> frame t's camera; kind: "static", "turning" or "moving" (travels as well:
+    not compensated)."""
 
     kind: str
     reference: int
@@ -56,11 +57,6 @@ class CameraMotion:
     focal: float | None          # px, self-calibrated (None where the turn is too small)
     turned_deg: float            # largest angle between a frame's camera and the reference's
     skew: float                  # how far the homographies are from rotations (0: exactly)
-
-    def summary(self) -> dict:
-        return {"kind": self.kind, "reference_frame": self.reference,
-                "turned_deg": round(self.turned_deg, 2), "skew": round(self.skew, 4),
-                "focal_px": None if self.focal is None else round(self.focal, 1)}
 
 
 def _person_boxes(obs: Observations, scale: float) -> np.ndarray:
@@ -101,15 +97,14 @@ def _pair_homography(prev: np.ndarray, this: np.ndarray, mask: np.ndarray
 
 
 def frame_homographies(info: videolib.VideoInfo, plan: videolib.FramePlan,
-                       obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+                       obs: Observations) -> np.ndarray:
     """(T, 3, 3) homographies frame t-1 -> frame t in image pixels (identity at t = 0 and
-    where unsure) and (T,) whether each was measured."""
+    where too few background corners could be followed)."""
     scale = WORK_LONG_SIDE / max(info.image_size)
     size = (round(info.width * scale), round(info.height * scale))
     to_work = np.diag([scale, scale, 1.0])
     boxes = _person_boxes(obs, scale)
     steps = np.repeat(np.eye(3)[None], len(plan.indices), axis=0)
-    measured = np.zeros(len(plan.indices), bool)
     prev = None
     for i, (_, image) in enumerate(videolib.read_frames(info, plan.indices)):
         gray = cv2.cvtColor(cv2.resize(image, size, interpolation=cv2.INTER_AREA),
@@ -119,9 +114,8 @@ def frame_homographies(info: videolib.VideoInfo, plan: videolib.FramePlan,
             h = _pair_homography(prev, gray, mask)
             if h is not None:
                 steps[i] = np.linalg.inv(to_work) @ h @ to_work
-                measured[i] = True
         prev = gray
-    return steps, measured
+    return steps
 
 
 def _skews(homographies: np.ndarray, focal: float, image_size: tuple[int, int]) -> np.ndarray:
@@ -173,7 +167,7 @@ def estimate_camera_motion(info: videolib.VideoInfo, plan: videolib.FramePlan,
     person's detections there, whose image boxes are left out."""
     default_focal = focal_from_fov(info.image_size, DEFAULT_DIAGONAL_FOV_DEG) \
         if obs.camera_K is None else float(obs.camera_K[0, 0])
-    steps, _ = frame_homographies(info, plan, obs)
+    steps = frame_homographies(info, plan, obs)
     t = len(steps)
     to_first = np.empty_like(steps)    # frame 0 pixels -> frame t pixels
     to_first[0] = np.eye(3)
