@@ -1,7 +1,8 @@
-"""Observe-stage throughput: frames/s of `observe()` and its decode vs MediaPipe time split.
+"""Observe-stage throughput: frames/s of `observe()`, its decode vs MediaPipe time split, and
+the camera-motion step's time (`camera_motion.estimate_camera_motion`, a second decoding pass).
 
-Clips: the four pose2sim demo views and ../shared/data/video/taichi_static.mp4 (each skipped
-with a message when absent). Usage:
+Clips: the four pose2sim demo views, ../shared/data/video/taichi_static.mp4 and
+running_track_panning.mp4 (each skipped with a message when absent). Usage:
 
     uv run python benchmarks/bench_observe.py --out out/bench_observe.json [--fps 25]
 """
@@ -15,6 +16,7 @@ import platform
 import time
 from pathlib import Path
 
+from physpose.camera_motion import estimate_camera_motion
 from physpose.demo_data import demo_videos
 from physpose.observe import ObserveConfig, PoseDetector, observe
 from physpose.paths import shared_data_dir
@@ -55,6 +57,13 @@ def bench(video: Path, cfg: ObserveConfig) -> dict:
     obs = observe(video, cfg, progress=False)
     row["observe_s"] = time.perf_counter() - t0
     row["observe_frames_per_s"] = obs.num_frames / row["observe_s"]
+    info = probe(video)
+    t0 = time.perf_counter()
+    motion = estimate_camera_motion(info, plan_frames(info, cfg.target_fps, cfg.start, cfg.end),
+                                    obs)
+    row["camera_motion_s"] = time.perf_counter() - t0
+    row["camera_motion_share"] = row["camera_motion_s"] / row["observe_s"]
+    row["camera_motion"] = motion.kind
     return row
 
 
@@ -67,23 +76,27 @@ def main() -> None:
     clips = [v for v in demo_videos() if v.is_file()]
     if not clips:
         print("pose2sim demo absent: run `make data` (skipping those clips)")
-    taichi = shared_data_dir() / "video" / "taichi_static.mp4"
-    if taichi.is_file():
-        clips.append(taichi)
-    else:
-        print(f"{taichi} absent: skipping it")
+    for name in ("taichi_static.mp4", "running_track_panning.mp4"):
+        video = shared_data_dir() / "video" / name
+        if video.is_file():
+            clips.append(video)
+        else:
+            print(f"{video} absent: skipping it")
     rows = [bench(v, cfg) for v in clips]
     print(f"{'clip':24s} {'size':>10s} {'frames':>6s} {'det%':>5s} {'decode ms':>9s} "
-          f"{'mp ms':>6s} {'load s':>6s} {'observe f/s':>11s}")
+          f"{'mp ms':>6s} {'load s':>6s} {'observe f/s':>11s} {'camera %':>8s} {'camera':>8s}")
     for r in rows:
         name = f"{Path(r['video']).parent.name[:8]}/{Path(r['video']).name}"
         print(f"{name:24s} {'x'.join(map(str, r['size'])):>10s} {r['frames']:6d} "
               f"{100 * r['detection_rate']:5.1f} {r['decode_ms_per_frame']:9.1f} "
               f"{r['mediapipe_ms_per_frame']:6.1f} {r['model_load_s']:6.2f} "
-              f"{r['observe_frames_per_s']:11.1f}")
+              f"{r['observe_frames_per_s']:11.1f} {100 * r['camera_motion_share']:8.1f} "
+              f"{r['camera_motion']:>8s}")
     meta = {"machine": platform.machine(), "cpus": os.cpu_count(), "python": platform.python_version(),
             "target_fps": args.fps, "note": "decode = grab+retrieve of the planned frames "
-            "(skipped frames included); mediapipe = Pose.process incl. BGR->RGB and mask resize"}
+            "(skipped frames included); mediapipe = Pose.process incl. BGR->RGB and mask resize; "
+            "camera % = the camera-motion step's time over the whole observe() time (which "
+            "includes it)"}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"meta": meta, "clips": rows}, indent=2) + "\n")
     print(f"wrote {args.out}")

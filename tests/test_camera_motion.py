@@ -72,7 +72,7 @@ def test_a_turning_camera_is_measured_with_its_focal_length(tmp_path):
         cv2.Rodrigues(truth[0])[0])), abs=0.3)
 
 
-def test_a_still_camera_is_static_and_a_sliding_one_is_moving(tmp_path):
+def test_a_still_camera_is_static_and_a_travelling_or_zooming_one_is_moving(tmp_path):
     n = 20
     still = _motion(_write(tmp_path / "still.avi", [np.eye(3)] * n), n)
     assert still.kind == "static" and still.turned_deg < 0.2
@@ -83,6 +83,11 @@ def test_a_still_camera_is_static_and_a_sliding_one_is_moving(tmp_path):
     travels = [k @ (np.eye(3) + np.outer([x, 0.0, 0.0], floor) / 1.5) @ np.linalg.inv(k)
                for x in np.linspace(0.0, 0.6, n)]
     assert _motion(_write(tmp_path / "travel.avi", travels), n).kind == "moving"
+    # Zooming in by 30 % changes the focal length, which no turn does either.
+    w, h = SIZE
+    zooms = [np.array([[z, 0, (1 - z) * w / 2], [0, z, (1 - z) * h / 2], [0, 0, 1.0]])
+             for z in np.linspace(1.0, 1.3, n)]
+    assert _motion(_write(tmp_path / "zoom.avi", zooms), n).kind == "moving"
 
 
 def test_stabilized_detections_are_in_the_reference_camera_and_map_back():

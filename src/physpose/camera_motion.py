@@ -17,8 +17,9 @@ the image centre); it turns MediaPipe's camera-aligned world landmarks into the 
 camera's axes and becomes the observations' intrinsics where they have none.
 
 A camera that also moves along (a tracking or dolly shot) shows parallax that no homography
-explains; then the fit's rotations are not rotations and nothing is changed (`CameraMotion.kind`
-says "moving"): physpose then still sees the person move with the camera.
+explains, and one that zooms changes its focal length; then the homographies are no rotations
+and nothing is changed (`CameraMotion.kind` says "moving"): physpose then still sees the person
+move with the camera.
 """
 
 from __future__ import annotations

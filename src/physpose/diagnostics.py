@@ -156,10 +156,11 @@ def camera_message(kind: str | None) -> str | None:
     """A warning where the camera moved along while filming (camera_motion.py), or None."""
     if kind != "moving":
         return None
-    return ("input: the camera moves (not only turns) while filming: physpose assumes a static "
-            "camera, so the motion is reconstructed as the camera saw it; a person the camera "
-            "follows seems to walk or run on the spot, and the physics, which cannot, strays "
-            "from them and restarts. Film from a fixed point (turning to follow is fine)")
+    return ("input: the camera moves (or zooms) while filming, not only turns: physpose "
+            "assumes a static camera, so the motion is reconstructed as the camera saw it; a "
+            "person the camera follows seems to walk or run on the spot, and the physics, which "
+            "cannot, strays from them and restarts. Film from a fixed point without zooming "
+            "(turning to follow is fine)")
 
 
 def raised_message(runs: list[tuple[int, int, float]], fps: float, supported: bool = True
