@@ -13,7 +13,9 @@ from physpose.cli import main
 from physpose.dynamics import PRESETS
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.errors import PhysposeError
-from physpose.pipeline import CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig, reconstruct
+from physpose.diagnostics import trimmed_message
+from physpose.pipeline import (CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig, reconstruct,
+                               trim_unseen_ends)
 from physpose.reconstruction import Reconstruction
 from physpose.shape import BodyShape
 
@@ -45,14 +47,32 @@ def test_reconstruct_cli_refuses_a_file_as_output_folder(tmp_path, capsys):
 def test_reconstruct_cli_refuses_a_clip_of_one_frame(tmp_path, capsys):
     body = build_body(BodyShape.from_height(1.75))
     _, obs, _ = simulated_clip(body, "stand", seconds=0.4)
-    one = obs.replace(**{name: getattr(obs, name)[:1] for name in
-                         ("timestamps", "keypoints2d", "detected", "interpolated",
-                          "world_landmarks", "masks", "frame_indices")
-                         if getattr(obs, name) is not None})
-    keypoints = one.save(tmp_path / "one.npz")
+    keypoints = obs.frames(0, 1).save(tmp_path / "one.npz")
     code = main(["reconstruct", str(keypoints), "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert code == 2 and "only 1 frame" in err and "one.npz" in err and "Traceback" not in err
+
+
+def test_frames_before_and_after_the_person_is_in_view_are_left_out():
+    body = build_body(BodyShape.from_height(1.75))
+    _, obs, _ = simulated_clip(body, "stand", seconds=0.6)
+    t = obs.num_frames
+    unseen = np.zeros(t, bool)
+    unseen[:4] = unseen[-3:] = True
+    blind = obs.replace(detected=obs.detected & ~unseen, interpolated=obs.interpolated & ~unseen,
+                        keypoints2d=np.where(unseen[:, None, None], 0.0, obs.keypoints2d))
+    kept, trimmed = trim_unseen_ends(blind)
+    assert trimmed == [4, t - 4] and kept.num_frames == t - 7
+    np.testing.assert_array_equal(kept.timestamps, obs.timestamps[4:t - 3])
+    np.testing.assert_array_equal(kept.keypoints2d, obs.keypoints2d[4:t - 3])
+    assert kept.masks is None or len(kept.masks) == t - 7
+    line = trimmed_message(trimmed, t, obs.fps)
+    assert f"before {4 / obs.fps:.2f} s" in line and f"after {(t - 3) / obs.fps:.2f} s" in line
+    # A clip seen throughout, or one seen in fewer than 3 frames, is left whole.
+    assert trim_unseen_ends(obs) == (obs, None)
+    unseen[:-2] = True
+    few = obs.replace(detected=obs.detected & ~unseen, interpolated=obs.interpolated & ~unseen)
+    assert trim_unseen_ends(few)[1] is None
 
 
 @pytest.mark.slow
@@ -71,7 +91,8 @@ def test_reconstruct_writes_the_contract(tmp_path):
     # A simulated motion is one the body can make: almost no unexplained root force.
     assert loaded.meta["dynamics"]["reference"]["root_residual_median"] < 0.05
     # A clean simulated clip raises none of the input warnings (physpose.diagnostics).
-    assert loaded.meta["diagnostics"] == {"camera_motion": None, "person_jumps": [],
+    assert loaded.meta["diagnostics"] == {"trimmed": None, "observed_frames": t,
+                                          "camera_motion": None, "person_jumps": [],
                                           "hidden_feet": 0.0, "raised": [],
                                           "supports": [], "seated": [], "seats": [],
                                           "invalid_windows": []}

@@ -152,6 +152,19 @@ def hidden_feet_message(share: float) -> str | None:
             "person, feet included")
 
 
+def trimmed_message(trimmed: list[int] | None, total: int, fps: float) -> str | None:
+    """A note on the frames left out before and after the person is in view, or None.
+    trimmed: [first, last] frames kept of `total`."""
+    if not trimmed:
+        return None
+    first, last = trimmed
+    parts = [f"before {first / fps:.2f} s" if first > 0 else "",
+             f"after {(last + 1) / fps:.2f} s" if last < total - 1 else ""]
+    return (f"input: no person in view {' or '.join(p for p in parts if p)} (of {total / fps:.2f} "
+            f"s analysed): only frames {first}-{last} are reconstructed (the output's frame_indices "
+            "and times say which video frames those are)")
+
+
 def camera_message(kind: str | None) -> str | None:
     """A warning where the camera moved along while filming (camera_motion.py), or None."""
     if kind != "moving":
@@ -203,7 +216,8 @@ def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
 
 def warning_lines(found: dict, fps: float) -> list[str]:
     """The warnings of a reconstruction's meta ``diagnostics`` (as the pipeline stores them)."""
-    lines = [camera_message(found.get("camera_motion")),
+    lines = [trimmed_message(found.get("trimmed"), found.get("observed_frames", 0), fps),
+             camera_message(found.get("camera_motion")),
              jumps_message(found.get("person_jumps", []), fps),
              hidden_feet_message(found.get("hidden_feet", 0.0)),
              raised_message([tuple(r) for r in found.get("raised", [])], fps,

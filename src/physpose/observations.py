@@ -108,6 +108,18 @@ class Observations:
             camera_motion=None if "camera_motion" not in d else str(d["camera_motion"]),
         )
 
+    def frames(self, start: int, stop: int) -> "Observations":
+        """The frames [start, stop) alone (every per-frame array sliced)."""
+        per_frame = ("timestamps", "keypoints2d", "detected", "interpolated", "world_landmarks",
+                     "masks", "frame_indices", "homographies")
+        return self.replace(**{k: None if getattr(self, k) is None else getattr(self, k)[start:stop]
+                               for k in per_frame})
+
+    def seen_span(self) -> tuple[int, int]:
+        """(first, last) frames with landmarks (detected or interpolated); (0, -1) if none."""
+        seen = np.flatnonzero(self.valid)
+        return (int(seen[0]), int(seen[-1])) if len(seen) else (0, -1)
+
     def frame_keypoints(self) -> np.ndarray:
         """keypoints2d (T, 33, 3) in each frame's own pixels: the same unless the camera turned
         (then keypoints2d are in the reference camera's image)."""

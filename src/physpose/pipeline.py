@@ -83,6 +83,16 @@ def load_observations(source: str | Path | Observations, cfg: ObserveConfig,
                                                                         progress=progress)
 
 
+def trim_unseen_ends(obs: Observations) -> tuple[Observations, list[int] | None]:
+    """The observations without the frames before the person comes into view and after they
+    leave it (no evidence there: left out rather than invented), and the [first, last] frames
+    kept (None where nothing was left out, or too little would be left)."""
+    first, last = obs.seen_span()
+    if (first, last) == (0, obs.num_frames - 1) or last - first + 1 < MIN_FRAMES:
+        return obs, None
+    return obs.frames(first, last + 1), [first, last]
+
+
 def reconstruct(video_or_observations: str | Path | Observations, out_dir: str | Path,
                 config: PipelineConfig = PipelineConfig(), *, height: float | None = None,
                 mass: float | None = None, resume: bool = True, progress: bool = True
@@ -117,6 +127,9 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                             f"reconstruct motion from (need at least {MIN_FRAMES})",
                             path=obs.source, remedy="use a longer clip, or a wider --start/--end")
     lap("observe")
+    observed_frames = obs.num_frames
+    obs, trimmed = trim_unseen_ends(obs)
+    _warn(diagnostics.trimmed_message(trimmed, observed_frames, obs.fps))
     _warn(diagnostics.camera_message(obs.camera_motion))
     jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
     _warn(diagnostics.jumps_message(jumps, obs.fps))
@@ -147,7 +160,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     meta = dict(recon.meta)
     meta.update(timings_s=timings, dynamics={**phys.meta(), "timings": phys.timings},
                 physpose_version=__version__,
-                diagnostics={"camera_motion": obs.camera_motion,
+                diagnostics={"trimmed": trimmed, "observed_frames": observed_frames,
+                             "camera_motion": obs.camera_motion,
                              "person_jumps": jumps, "hidden_feet": hidden_feet,
                              "raised": [list(r) for r in raised],
                              "supports": [[*b.center, *b.size] for b in boxes],
