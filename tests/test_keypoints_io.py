@@ -51,13 +51,17 @@ def test_minimal_file_loads_with_defaults(tmp_path, writer):
 @pytest.mark.parametrize("ext", [".json", ".npz"])
 def test_save_then_load_round_trips(tmp_path, ext):
     original = load_keypoints(_write_json(tmp_path, _doc(timestamps=(np.arange(T) * 0.04 + 1).tolist())))
+    turned = np.repeat(np.eye(3)[None], T, axis=0)
+    turned[:, 0, 2] = np.arange(T)    # where a turning camera's observe stage left them
     original = original.replace(interpolated=np.array([0, 0, 1, 0, 0, 0], bool),
-                                frame_indices=np.arange(T) * 2)
+                                frame_indices=np.arange(T) * 2, homographies=turned,
+                                camera_motion="turning")
     back = load_keypoints(save_keypoints(original, tmp_path / f"copy{ext}"))
     for key in ("keypoints2d", "world_landmarks", "camera_K", "timestamps", "detected",
-                "interpolated", "frame_indices"):
+                "interpolated", "frame_indices", "homographies"):
         np.testing.assert_allclose(getattr(back, key), getattr(original, key), err_msg=key)
     assert back.fps == original.fps and back.image_size == original.image_size
+    assert back.camera_motion == "turning"
 
 
 def test_observations_npz_is_a_keypoints_file(tmp_path):
@@ -145,6 +149,13 @@ def test_timestamps_must_increase(tmp_path):
 
 def test_unknown_key_is_probably_a_typo(tmp_path):
     assert "unknown key(s) world_landmark" in _error(tmp_path, _doc(world_landmark=[]))
+
+
+def test_bad_camera_motion(tmp_path):
+    with pytest.raises(PhysposeError, match=r"homographies has shape \(2, 3, 3\)"):
+        load_keypoints(_write_json(tmp_path, _doc(homographies=np.zeros((2, 3, 3)).tolist())))
+    with pytest.raises(PhysposeError, match="camera_motion 'panning' is not"):
+        load_keypoints(_write_json(tmp_path, _doc(camera_motion="panning")))
 
 
 def test_bad_camera_matrix(tmp_path):

@@ -23,7 +23,8 @@ KEYPOINTS_EXTENSIONS = (".json", ".npz")
 _DOC = "see docs/keypoints_format.md"
 _REQUIRED = ("fps", "image_size", "keypoints2d")
 _OPTIONAL = ("world_landmarks", "camera_K", "timestamps", "detected", "interpolated",
-             "frame_indices", "masks", "source", "landmark_names", "format_version", "format")
+             "frame_indices", "masks", "source", "landmark_names", "format_version", "format",
+             "homographies", "camera_motion")
 
 
 def is_keypoints_file(path: str | Path) -> bool:
@@ -62,10 +63,12 @@ def save_keypoints(obs: Observations, path: str | Path) -> Path:
         "image_size": [int(v) for v in obs.image_size],
     }
     for key in ("timestamps", "keypoints2d", "detected", "interpolated", "world_landmarks",
-                "camera_K", "frame_indices"):
+                "camera_K", "frame_indices", "homographies"):
         value = getattr(obs, key)
         if value is not None:
             doc[key] = np.asarray(value).tolist()
+    if obs.camera_motion is not None:
+        doc["camera_motion"] = obs.camera_motion
     with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(doc, allow_nan=False))
     return path
@@ -157,6 +160,17 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
     if camera_k is not None and (camera_k.shape != (3, 3) or not np.isfinite(camera_k).all()):
         fail(f"camera_K has shape {camera_k.shape} or non-finite values, expected a finite "
              "3x3 matrix", "give the intrinsics [[fx,0,cx],[0,fy,cy],[0,0,1]] in pixels")
+    homographies = None if raw.get("homographies") is None else \
+        _array(raw["homographies"], "homographies", fail)
+    if homographies is not None and (homographies.shape != (t, 3, 3)
+                                     or not np.isfinite(homographies).all()):
+        fail(f"homographies has shape {homographies.shape} or non-finite values, expected "
+             f"({t}, 3, 3)", "give one 3x3 map per frame, or leave homographies out")
+    motion = raw.get("camera_motion")
+    motion = None if motion is None else str(np.asarray(motion))
+    if motion not in (None, "static", "turning", "moving"):
+        fail(f"camera_motion {motion!r} is not static, turning or moving",
+             "leave camera_motion out, or write what `physpose observe` wrote")
     masks = raw.get("masks")
     source = raw.get("source")
     return Observations(
@@ -166,7 +180,8 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
         world_landmarks=per_frame["world_landmarks"], masks=None if masks is None else np.asarray(masks),
         camera_K=camera_k,
         frame_indices=None if per_frame["frame_indices"] is None
-        else per_frame["frame_indices"].astype(np.int64))
+        else per_frame["frame_indices"].astype(np.int64),
+        homographies=homographies, camera_motion=motion)
 
 
 def _number(value: Any) -> float | None:
