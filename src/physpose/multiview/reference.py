@@ -215,13 +215,4 @@ def _align_frames(views: tuple[Observations, ...], videos: tuple[Path, ...]
         if obs.num_frames != n:
             _log.warning("%s: %d frames, using the %d common to all views", video,
                          obs.num_frames, n)
-    return tuple(_cut(obs, n) for obs in views)
-
-
-def _cut(obs: Observations, n: int) -> Observations:
-    if obs.num_frames == n:
-        return obs
-    per_frame = ("timestamps", "keypoints2d", "detected", "interpolated", "world_landmarks",
-                 "masks", "frame_indices")
-    return obs.replace(**{k: getattr(obs, k)[:n] for k in per_frame
-                          if getattr(obs, k) is not None})
+    return tuple(obs if obs.num_frames == n else obs.frames(0, n) for obs in views)
