@@ -13,7 +13,7 @@ import pytest
 from synthetic_video import make_noise_video
 
 from physpose.cli import main
-from physpose.keypoints_io import save_keypoints
+from physpose.keypoints_io import load_keypoints, save_keypoints
 from physpose.observations import Observations
 
 PHYSPOSE = Path(sys.executable).with_name("physpose")  # the installed console script
@@ -103,6 +103,10 @@ def test_video_end_to_end_then_cached(pose2sim_demo, tmp_path, capsys):
     obs = Observations.load(out / "observations.npz")
     assert obs.num_frames == 4 and obs.fps == 10 and obs.detected.all()
     assert obs.frame_indices.tolist() == [0, 6, 12, 18]
+    assert obs.camera_motion == "static"
+    # The file is what `physpose fit` and `reconstruct` take as precomputed keypoints.
+    again = load_keypoints(out / "observations.npz")
+    assert again.camera_motion == "static" and again.num_frames == 4
     config = json.loads((out / "config.json").read_text())
     assert config["observe"]["target_fps"] == 10 and config["observe"]["end"] == 0.4
     cap = cv2.VideoCapture(str(out / "overlay_landmarks.mp4"))
