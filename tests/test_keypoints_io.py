@@ -154,7 +154,7 @@ def test_unknown_key_is_probably_a_typo(tmp_path):
 def test_bad_camera_motion(tmp_path):
     with pytest.raises(PhysposeError, match=r"homographies has shape \(2, 3, 3\)"):
         load_keypoints(_write_json(tmp_path, _doc(homographies=np.zeros((2, 3, 3)).tolist())))
-    with pytest.raises(PhysposeError, match="camera_motion 'panning' is not"):
+    with pytest.raises(PhysposeError, match="camera_motion 'panning' is not one of static, turning, moving"):
         load_keypoints(_write_json(tmp_path, _doc(camera_motion="panning")))
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from physpose.cache import atomic_path
 from physpose.errors import PhysposeError
 from physpose.joints import LANDMARK_NAMES, NUM_LANDMARKS
-from physpose.observations import Observations
+from physpose.observations import CAMERA_MOTIONS, Observations
 
 KEYPOINTS_EXTENSIONS = (".json", ".npz")
 _DOC = "see docs/keypoints_format.md"
@@ -168,8 +168,8 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
              f"({t}, 3, 3)", "give one 3x3 map per frame, or leave homographies out")
     motion = raw.get("camera_motion")
     motion = None if motion is None else str(np.asarray(motion))
-    if motion not in (None, "static", "turning", "moving"):
-        fail(f"camera_motion {motion!r} is not static, turning or moving",
+    if motion is not None and motion not in CAMERA_MOTIONS:
+        fail(f"camera_motion {motion!r} is not one of {', '.join(CAMERA_MOTIONS)}",
              "leave camera_motion out, or write what `physpose observe` wrote")
     masks = raw.get("masks")
     source = raw.get("source")

@@ -17,6 +17,7 @@ from physpose.joints import NUM_LANDMARKS
 from physpose.npz_io import read_npz, write_npz
 
 FORMAT_VERSION = 1
+CAMERA_MOTIONS = ("static", "turning", "moving")   # what `Observations.camera_motion` can say
 
 
 @dataclass(frozen=True, eq=False)
@@ -179,5 +180,5 @@ def validate(obs: Observations) -> None:
         fail(f"camera_K has shape {np.asarray(obs.camera_K).shape}, expected (3, 3)")
     if obs.homographies is not None and np.asarray(obs.homographies).shape != (t, 3, 3):
         fail(f"homographies has shape {np.asarray(obs.homographies).shape}, expected ({t}, 3, 3)")
-    if obs.camera_motion not in (None, "static", "turning", "moving"):
-        fail(f"camera_motion {obs.camera_motion!r} is not static, turning or moving")
+    if obs.camera_motion is not None and obs.camera_motion not in CAMERA_MOTIONS:
+        fail(f"camera_motion {obs.camera_motion!r} is not one of {', '.join(CAMERA_MOTIONS)}")
