@@ -46,3 +46,21 @@ def truncate(path: Path, out: Path, fraction: float) -> Path:
     data = path.read_bytes()
     out.write_bytes(data[: int(len(data) * fraction)])
     return out
+
+
+def tag_rotation(path: Path, degrees: int) -> Path:
+    """Set an mp4's display rotation in place, as phones store portrait video (landscape
+    pixels and a tag that players apply): the track header's matrix, no re-encoding."""
+    data = bytearray(path.read_bytes())
+    at = data.find(b"tkhd")
+    assert at > 0, f"no track header in {path}"
+    version = data[at + 4]
+    matrix = at + 4 + (52 if version == 1 else 40)
+    a, b = {90: (0, 1), 180: (-1, 0), 270: (0, -1)}[degrees]
+    fixed = [a, b, 0, -b, a, 0, 0, 0, 1]   # 16.16 fixed point, the last column 2.30
+    for k, value in enumerate(fixed):
+        scale = 1 << 30 if k in (2, 5, 8) else 1 << 16
+        data[matrix + 4 * k:matrix + 4 * k + 4] = int(value * scale).to_bytes(4, "big",
+                                                                               signed=True)
+    path.write_bytes(bytes(data))
+    return path

@@ -5,7 +5,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
-from synthetic_video import frame_value, make_video, truncate
+from synthetic_video import frame_value, make_video, tag_rotation, truncate
 
 from physpose.errors import PhysposeError
 from physpose.video import VideoInfo, plan_frames, probe, read_frames
@@ -71,6 +71,26 @@ def test_read_frames_returns_the_planned_frames(tmp_path):
     assert [i for i, _ in got] == wanted.tolist()
     for i, image in got:  # MJPG is lossy: grey levels come back within a few units
         assert abs(float(image.mean()) - frame_value(i)) < 4
+
+
+@pytest.mark.parametrize("degrees", [90, 270])
+def test_a_phone_video_is_read_turned_as_players_show_it(tmp_path, degrees):
+    """Landscape pixels with a rotation tag (how phones store portrait video): the frames come
+    out turned by the tag, and the size says so."""
+    path = tmp_path / "phone.mp4"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), 25, (64, 48))
+    for _ in range(5):
+        image = np.zeros((48, 64, 3), np.uint8)
+        image[:8, :8] = 255                      # a mark in the top-left corner
+        writer.write(image)
+    writer.release()
+    info = probe(tag_rotation(path, degrees))
+    assert (info.width, info.height) == (48, 64)
+    _, image = next(read_frames(info, np.array([0])))
+    assert image.shape == (64, 48, 3)
+    y, x = np.argwhere(image[..., 0] > 200).mean(axis=0)
+    # Turned clockwise the mark lands top right; counter-clockwise, bottom left.
+    assert (x > 24 and y < 32) if degrees == 90 else (x < 24 and y > 32)
 
 
 def test_missing_file(tmp_path):

@@ -63,7 +63,7 @@ from physpose.observations import Observations
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 4  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 5  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 _log = logging.getLogger(__name__)

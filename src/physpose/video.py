@@ -65,6 +65,9 @@ def _open(path: Path) -> cv2.VideoCapture:
         cap.release()
         raise PhysposeError("cannot open this file as a video (no frames, corrupt, truncated "
                             "or an unsupported codec)", path=path, remedy=_REENCODE)
+    # Phone videos are often stored landscape with a rotation tag that players apply; OpenCV
+    # leaves it off by default, which shows the person lying on their side.
+    cap.set(cv2.CAP_PROP_ORIENTATION_AUTO, 1)
     return cap
 
 
