@@ -2,13 +2,17 @@
 
 from __future__ import annotations
 
+import shutil
+import subprocess
+
 import cv2
 import numpy as np
 import pytest
 from synthetic_video import frame_value, make_video, tag_rotation, truncate
 
 from physpose.errors import PhysposeError
-from physpose.video import VideoInfo, plan_frames, probe, read_frames
+from physpose.video import (VideoInfo, drift_message, plan_frames, probe, read_frames,
+                            timing_drift)
 
 
 def _info(fps: float, frames: int) -> VideoInfo:
@@ -91,6 +95,32 @@ def test_a_phone_video_is_read_turned_as_players_show_it(tmp_path, degrees):
     y, x = np.argwhere(image[..., 0] > 200).mean(axis=0)
     # Turned clockwise the mark lands top right; counter-clockwise, bottom left.
     assert (x > 24 and y < 32) if degrees == 90 else (x < 24 and y > 32)
+
+
+def test_timing_drift_tells_a_variable_frame_rate():
+    info = _info(30.0, 100)
+    even = np.arange(10) / 30.0 + 0.5
+    assert timing_drift(info, np.arange(10), list(even)) == pytest.approx(0.0)
+    assert drift_message(info, 0.2) is None
+    late = even.copy()
+    late[5:] += 0.1                         # a 0.1 s pause the container records
+    assert timing_drift(info, np.arange(10), list(late)) == pytest.approx(3.0)
+    assert "not evenly spaced" in drift_message(info, 3.0)
+
+
+@pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg program to write "
+                    "a variable-frame-rate file (apt-get install ffmpeg)")
+def test_a_variable_frame_rate_video_is_warned_about(tmp_path):
+    source = make_video(tmp_path / "even.mp4", 40, fps=20)
+    uneven = tmp_path / "uneven.mp4"      # 6 frames of every 10 kept, at their own times
+    subprocess.run(["ffmpeg", "-loglevel", "error", "-y", "-i", str(source), "-vf",
+                    "select='lt(mod(n\\,10)\\,6)'", "-fps_mode", "vfr", "-c:v", "mpeg4",
+                    str(uneven)], check=True)
+    info = probe(uneven)
+    times: list[float] = []
+    indices = np.arange(info.frame_count)
+    list(read_frames(info, indices, times))
+    assert drift_message(info, timing_drift(info, indices, times)) is not None
 
 
 def test_missing_file(tmp_path):

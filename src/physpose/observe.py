@@ -236,7 +236,7 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
                     config=dataclasses.replace(cfg, use_cache=True))
     if cfg.use_cache and (hit := cache.get(key)) is not None:
         return _from_arrays(hit, source=str(video))
-    obs = _detect_all(info, plan, cfg, progress, check=False)
+    obs = _detect_all(info, plan, cfg, progress, check=False, timing_check=True)
     zoomed, seed = False, None
     if cfg.person is None and obs.detected.sum() < cfg.min_detection_fraction * obs.num_frames:
         # Perhaps the person is too small for the detector's view of the whole frame: look
@@ -277,11 +277,11 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
 
 def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig,
                 progress: bool, regions: np.ndarray | None = None, check: bool = True,
-                zoom: Follower | None = None) -> Observations:
+                zoom: Follower | None = None, timing_check: bool = False) -> Observations:
     """Detect in every planned frame; regions (T, 4): image boxes outside which each frame is
     blacked out first (subject.py); zoom: follow the person in a crop around their last
     detection, starting from this follower. check: fail when too few frames have a
-    detection."""
+    detection. timing_check: warn when the frames are not evenly spaced in time."""
     t = len(plan.indices)
     kp = np.zeros((t, NUM_LANDMARKS, 3))
     world = np.zeros((t, NUM_LANDMARKS, 3))
@@ -296,7 +296,8 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
     bar = tqdm(total=t, unit="frame", desc=f"observe {info.path.name}", disable=not progress,
                leave=False)
     with bar, PoseDetector(cfg) as detector:
-        for i, (_, image) in enumerate(videolib.read_frames(info, plan.indices)):
+        times: list[float] = []
+        for i, (_, image) in enumerate(videolib.read_frames(info, plan.indices, times)):
             read = i + 1
             bar.update()
             if zoom is not None:
@@ -316,6 +317,9 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
             kp[i], world[i] = found.keypoints2d, found.world_landmarks
             if masks is not None and found.mask is not None:
                 masks[i] = found.mask
+    if timing_check and (message := videolib.drift_message(
+            info, videolib.timing_drift(info, plan.indices, times))):
+        _log.warning("%s", message)
     if read < t:  # the file ended a little early (within the container's counting slack)
         kp, world, detected = kp[:read], world[:read], detected[:read]
         masks = None if masks is None else masks[:read]

@@ -3,7 +3,8 @@
 Frames are resampled by picking, for each target timestamp `start + k / fps`, the source frame
 nearest to it (no blending). The target rate never exceeds the source rate: asking for more
 frames per second than the video has gives the source rate (and `FramePlan.note` says so).
-Videos are assumed to have a constant frame rate; frame i is at time i / source_fps.
+Videos are assumed to have a constant frame rate; frame i is at time i / source_fps (the observe
+stage warns where the container's own times say otherwise: `timing_drift`).
 """
 
 from __future__ import annotations
@@ -143,8 +144,10 @@ def plan_frames(info: VideoInfo, target_fps: float = 25.0, start: float | None =
     return FramePlan(fps=fps, indices=indices, timestamps=indices / info.fps, note=note)
 
 
-def read_frames(info: VideoInfo, indices: np.ndarray) -> Iterator[tuple[int, np.ndarray]]:
-    """Yield (source index, BGR image (H, W, 3) uint8) for each of the increasing `indices`.
+def read_frames(info: VideoInfo, indices: np.ndarray, times: list[float] | None = None
+                ) -> Iterator[tuple[int, np.ndarray]]:
+    """Yield (source index, BGR image (H, W, 3) uint8) for each of the increasing `indices`;
+    `times`, if given, receives each yielded frame's presentation time in the container (s).
 
     Raises PhysposeError if the file ends well before the frames it promised (truncated or
     corrupt); a shortfall within the container's usual counting slack just ends the iteration.
@@ -165,9 +168,33 @@ def read_frames(info: VideoInfo, indices: np.ndarray) -> Iterator[tuple[int, np.
             if not ok or frame is None:
                 raise PhysposeError("frame could not be decoded (corrupt video)", path=info.path,
                                     frame=idx, remedy=_REENCODE)
+            if times is not None:
+                times.append(cap.get(cv2.CAP_PROP_POS_MSEC) / 1000.0)
             yield idx, frame
     finally:
         cap.release()
+
+
+def timing_drift(info: VideoInfo, indices: np.ndarray, times: list[float]) -> float:
+    """Largest gap (in source frames) between the container's times of the frames read and
+    index / fps, measured from the first: about 0 for a constant frame rate; a variable-rate
+    video (common from phones) is read as if its frames were evenly spaced."""
+    n = min(len(indices), len(times))
+    if n < 2:
+        return 0.0
+    nominal = (np.asarray(indices[:n], dtype=float) - indices[0]) / info.fps
+    actual = np.asarray(times[:n]) - times[0]
+    return float(np.max(np.abs(actual - nominal)) * info.fps)
+
+
+def drift_message(info: VideoInfo, drift: float) -> str | None:
+    """A warning when timing_drift exceeds half a frame, or None."""
+    if drift <= 0.5:
+        return None
+    return (f"{info.path}: the video's frames are not evenly spaced in time (a variable frame "
+            f"rate; up to {drift:.1f} frames off {info.fps:g} fps): physpose reads them as if "
+            f"they were, so speeds are off where the spacing changes. For true timing, "
+            f"{_REENCODE}")
 
 
 def _check_shortfall(info: VideoInfo, decoded: int) -> None:
