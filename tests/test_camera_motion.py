@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from physpose.camera_motion import (estimate_camera_motion, frame_cameras, nearest_rotations,
-                                    stabilize)
+from physpose.camera_motion import (CameraMotion, estimate_camera_motion, frame_cameras,
+                                    nearest_rotations, stabilize)
 from physpose.diagnostics import camera_message, warning_lines
 from physpose.joints import NUM_LANDMARKS
 from physpose.observations import Observations
@@ -105,7 +105,6 @@ def test_stabilized_detections_are_in_the_reference_camera_and_map_back():
                               keypoints2d=np.concatenate([seen[..., :2] / seen[..., 2:],
                                                           reference[..., 2:]], axis=-1),
                               world_landmarks=np.einsum("tij,tnj->tni", turns, direction))
-    from physpose.camera_motion import CameraMotion
     motion = CameraMotion(kind="turning", reference=2, homographies=homographies,
                           rotations=turns, focal=FOCAL, turned_deg=6.0, skew=0.0)
     out = stabilize(obs, motion)

@@ -115,14 +115,15 @@ TILE_SIZES = (0.6, 0.4, 0.25)   # sides of the square tiles searched for a small
 def tiles(image_size: tuple[int, int]) -> list[np.ndarray]:
     """Square boxes [x0, y0, x1, y1] covering the image at each of TILE_SIZES, largest first."""
     width, height = image_size
+
+    def starts(length: float, side: float) -> np.ndarray:   # half a side apart, both ends
+        return np.linspace(0.0, length - side, int(np.ceil((length - side) / (side / 2))) + 1)
+
     boxes = []
     for size in TILE_SIZES:
         side = size * min(width, height)
-        xs = np.linspace(0.0, width - side, max(1, int(np.ceil((width - side) / (side / 2)))
-                                                 + 1))
-        ys = np.linspace(0.0, height - side, max(1, int(np.ceil((height - side) / (side / 2)))
-                                                  + 1))
-        boxes += [np.array([x, y, x + side, y + side]) for y in ys for x in xs]
+        boxes += [np.array([x, y, x + side, y + side])
+                  for y in starts(height, side) for x in starts(width, side)]
     return boxes
 
 
