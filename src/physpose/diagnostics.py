@@ -173,7 +173,9 @@ def camera_message(kind: str | None) -> str | None:
             "assumes a static camera, so the motion is reconstructed as the camera saw it; a "
             "person the camera follows seems to walk or run on the spot, and the physics, which "
             "cannot, strays from them and restarts. Film from a fixed point without zooming "
-            "(turning to follow is fine)")
+            "(turning to follow is fine), or try --camera-travel travelling: the physics then "
+            "follows the person's own path, the camera's read off the standing feet "
+            "(docs/dynamics.md, A travelling camera)")
 
 
 def raised_message(runs: list[tuple[int, int, float]], fps: float, supported: bool = True

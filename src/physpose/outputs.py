@@ -51,7 +51,8 @@ def motion_metrics(rec: Reconstruction, motion: str) -> dict[str, float]:
     kwargs = {}
     landmarks = _landmarks(rec, motion)
     if landmarks is not None:
-        est = project(landmarks, rec.camera_K, rec.camera_T_world2cam)  # (T, 33, 2) px
+        est = project(rec.as_filmed(landmarks, motion), rec.camera_K,
+                      rec.camera_T_world2cam)  # (T, 33, 2) px
         valid = np.isfinite(est).all(axis=-1)
         weight = np.where(valid, rec.keypoints2d[..., 2], 0.0)
         if weight.sum() > 0:

@@ -156,7 +156,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     invalid = diagnostics.invalid_window_runs(phys.windows)
     _warn(diagnostics.invalid_message(invalid, kin.fps))
     recon = kin.to_reconstruction(obs, body_mjcf=body.xml).replace(
-        joints_physics=phys.joints, qpos_physics=phys.qpos, landmarks_physics=phys.landmarks)
+        **phys.reconstruction_fields())
     meta = dict(recon.meta)
     meta.update(timings_s=timings, dynamics={**phys.meta(), "timings": phys.timings},
                 physpose_version=__version__,

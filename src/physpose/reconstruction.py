@@ -18,7 +18,8 @@ from physpose.npz_io import read_npz, write_npz
 
 _REQUIRED = ("fps", "joint_names", "joints_kinematic", "camera_K", "camera_T_world2cam",
              "landmarks_kinematic", "keypoints2d")
-_OPTIONAL = ("joints_physics", "qpos_physics", "landmarks_physics", "body_mjcf", "qpos_kinematic")
+_OPTIONAL = ("joints_physics", "qpos_physics", "landmarks_physics", "body_mjcf", "qpos_kinematic",
+             "camera_travel_physics")
 
 
 def restart_frames(windows: list[dict]) -> list[int]:
@@ -52,6 +53,9 @@ class Reconstruction:
     landmarks_physics: np.ndarray | None = None  # (T, 33, 3)
     body_mjcf: str | None = None                 # MJCF of the body and scene
     qpos_kinematic: np.ndarray | None = None     # (T, nq) the kinematic estimate in the same model
+    # (T, 3) m: where the camera travelled with the person, how far it had moved by each frame
+    # in the physics world (camera_T_world2cam sees the physics moved back by it; `as_filmed`)
+    camera_travel_physics: np.ndarray | None = None
     meta: dict = dataclasses.field(default_factory=dict)  # JSON-able extras (config, timings)
 
     def __post_init__(self) -> None:
@@ -61,7 +65,7 @@ class Reconstruction:
             "joints_kinematic": (t, j, 3), "landmarks_kinematic": (t, NUM_LANDMARKS, 3),
             "keypoints2d": (t, NUM_LANDMARKS, 3), "camera_K": (3, 3),
             "camera_T_world2cam": (4, 4), "joints_physics": (t, j, 3),
-            "landmarks_physics": (t, NUM_LANDMARKS, 3),
+            "landmarks_physics": (t, NUM_LANDMARKS, 3), "camera_travel_physics": (t, 3),
         }
         for key, shape in checks.items():
             value = getattr(self, key)
@@ -110,6 +114,17 @@ class Reconstruction:
             raise PhysposeError("this reconstruction has no physics result",
                                 remedy="run `physpose reconstruct` instead of `physpose fit`")
         return self.joints_physics
+
+    def as_filmed(self, points: np.ndarray, motion: str = "best") -> np.ndarray:
+        """Points (T, ..., 3) of a motion ('kinematic', 'physics' or 'best', as in `joints`)
+        where camera_T_world2cam saw them: the physics moved back by the camera's travel where
+        the camera travelled with the person (camera_travel_physics), otherwise as given."""
+        physics = motion == "physics" or (motion == "best" and self.has_physics)
+        if not physics or self.camera_travel_physics is None:
+            return points
+        points = np.asarray(points, dtype=float)
+        travel = np.asarray(self.camera_travel_physics, dtype=float)
+        return points - travel.reshape((len(travel),) + (1,) * (points.ndim - 2) + (3,))
 
     def replace(self, **changes) -> "Reconstruction":
         return dataclasses.replace(self, **changes)

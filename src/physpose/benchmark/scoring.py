@@ -31,7 +31,7 @@ def score_clip(clip: Clip, recon: Reconstruction) -> tuple[dict[str, float], dic
     # own bottom face (skeleton.JOINT_POINTS), so a resting simulated foot sits at about -2 mm
     # and would never count as "in contact" at -15 mm (docs/metrics.md).
     contact = CONTACT_PRESETS["kinematics"]
-    est_2d = project(joints, recon.camera_K, recon.camera_T_world2cam)
+    est_2d = project(recon.as_filmed(joints), recon.camera_K, recon.camera_T_world2cam)
     if clip.truth is not None:
         metrics = evaluate(joints, clip.truth.joints, fps=recon.fps, contact=contact,
                            T_est2common=recon.camera_T_world2cam,

@@ -14,6 +14,7 @@ import numpy as np
 from physpose import diagnostics
 from physpose.dynamics import PRESETS
 from physpose.dynamics.objective import TERMS, ObjectiveWeights
+from physpose.dynamics.travel import CAMERA_SETTINGS
 from physpose.cli.observe import PERSON_HELP, STATIC_CAMERA_HELP, image_point
 from physpose.errors import PhysposeError
 from physpose.export import FORMATS
@@ -87,6 +88,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="analysis stops before this second (default: end of the video)")
     g.add_argument("--person", type=image_point, metavar="X,Y", help=PERSON_HELP)
     g.add_argument("--static-camera", action="store_true", help=STATIC_CAMERA_HELP)
+    g.add_argument("--camera-travel", choices=CAMERA_SETTINGS, default=None,
+                   help="travelling: the camera moved along with the person (a tracking "
+                        "shot): the physics follows the person's own path, the camera's "
+                        "travel read off the estimate's standing feet; auto: so where the "
+                        "camera is found moving; still (default): the camera stood still "
+                        "(docs/dynamics.md, A travelling camera)")
     g.add_argument("--camera", type=Path, metavar="FILE",
                    help="camera calibration: a Qualisys .qca.txt, or a JSON file "
                         '{"K": [[fx,0,cx],[0,fy,cy],[0,0,1]]} (default: intrinsics estimated)')
@@ -182,6 +189,8 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                                                                        dynamics.weights))
     if args.place_stretches is not None:
         dynamics = dataclasses.replace(dynamics, place_stretches=args.place_stretches)
+    if args.camera_travel is not None:
+        dynamics = dataclasses.replace(dynamics, camera=args.camera_travel)
     if args.balance_hz is not None:
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from physpose.dynamics.balance import BalanceGains
 from physpose.dynamics.controller import ControllerGains
 from physpose.dynamics.objective import ObjectiveWeights
+from physpose.dynamics.travel import CAMERA_SETTINGS
 from physpose.errors import PhysposeError
 
 # Hinges whose targets CMA-ES varies (optimize.searched_dofs).
@@ -60,6 +61,12 @@ class DynamicsConfig:
     place_stretches: move each continuous simulated stretch (between restarts) horizontally so
         that its COM matches the estimate's on average (sequential runs on a floor without
         obstacles, where the moved stretch is the same simulation; stretches.py).
+    camera: "still" (the default) takes the camera as standing still; "travelling" follows a
+        camera that travelled with the person: the estimate is moved on by the camera's path,
+        read off its standing feet, and the re-projection term moves the simulated body back
+        by it (travel.py); "auto" does so where the observe stage found the camera moving
+        (Observations.camera_motion "moving"). Not the default: on the material at hand it
+        did not lower the restarts or the image error (docs/dynamics.md).
     nthread: rollout threads (does not change results).
     """
 
@@ -94,6 +101,7 @@ class DynamicsConfig:
     candidates: int = 1
     place_stretches: bool = True
     seed: int = 0
+    camera: str = "still"
     nthread: int = 2
 
     def __post_init__(self) -> None:
@@ -118,13 +126,18 @@ class DynamicsConfig:
                                 f"{self.retry_distance} and reset_distance={self.reset_distance}"
                                 " > 0", remedy="use e.g. retries=2, retry_distance=0.15, "
                                 "reset_distance=0.15")
+        if self.camera not in CAMERA_SETTINGS:
+            raise PhysposeError(f"dynamics camera {self.camera!r} is unknown",
+                                remedy=f"use one of {CAMERA_SETTINGS}")
         if self.iterations < 0:
             raise PhysposeError("dynamics iterations must be >= 0", remedy="use e.g. 20")
 
     def identity(self) -> dict:
-        """The fields that change results (everything but the thread count)."""
+        """The fields that change results (everything but the thread count; ``camera`` only
+        through what it resolves to for a clip, which the run's inputs carry)."""
         out = dataclasses.asdict(self)
         out.pop("nthread")
+        out.pop("camera")
         if not self.balance.enabled:
             out.pop("balance")  # switched off: the same runs (and checkpoints) as before it
         if self.weights.swing == 0:

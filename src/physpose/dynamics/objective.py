@@ -98,6 +98,9 @@ class ObjectiveReference:
     T_world2cam (4, 4); metres_per_px (T,) at the kinematic root's depth; fps Hz.
     feet (T, 2, 3, 3) m: each foot's ankle, heel and toe landmarks (FOOT_LANDMARKS), x and y
     relative to the root; swing (T, 2) bool: the foot is in swing (the ``swing`` term).
+    camera_travel (T, 3) m: where the camera travelled with the person (travel.py), how far it
+    had moved by each frame; the ``reprojection`` term sees the simulated body moved back by
+    it. None for a still camera.
     """
 
     qpos: np.ndarray
@@ -111,6 +114,7 @@ class ObjectiveReference:
     fps: float
     feet: np.ndarray
     swing: np.ndarray
+    camera_travel: np.ndarray | None = None
 
 
 def joint_quaternions(qpos: np.ndarray) -> np.ndarray:
@@ -136,15 +140,19 @@ def root_relative_feet(landmarks: np.ndarray, qpos: np.ndarray) -> np.ndarray:
     return feet
 
 
-def swing_mask(model: mujoco.MjModel, landmarks: np.ndarray) -> np.ndarray:
-    """(T, 2) bool: each foot's heel and toe (landmarks (T, 33, 3)) are both more than
-    SWING_HEIGHT above their heights in the model's standing pose (keyframe "standing")."""
+def standing_heights(model: mujoco.MjModel) -> np.ndarray:
+    """(33,) m: the landmark sites' heights in the model's standing pose (keyframe
+    "standing", feet on the floor)."""
     key = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, "standing")
     if key < 0:
         raise ValueError("the body model has no 'standing' keyframe (build it with build_body)")
-    standing = model.key_qpos[key]
-    rest = landmark_sites(model, standing[None])[0, :, 2]
-    lifted = landmarks[..., 2] - rest > SWING_HEIGHT  # (T, 33)
+    return landmark_sites(model, model.key_qpos[key][None])[0, :, 2]
+
+
+def swing_mask(model: mujoco.MjModel, landmarks: np.ndarray) -> np.ndarray:
+    """(T, 2) bool: each foot's heel and toe (landmarks (T, 33, 3)) are both more than
+    SWING_HEIGHT above their heights in the model's standing pose (`standing_heights`)."""
+    lifted = landmarks[..., 2] - standing_heights(model) > SWING_HEIGHT  # (T, 33)
     return np.stack([lifted[:, heel] & lifted[:, toe] for _, heel, toe in FOOT_LANDMARKS], axis=-1)
 
 
@@ -162,14 +170,18 @@ def centre_of_mass(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
 
 def make_reference(model: mujoco.MjModel, qpos: np.ndarray, keypoints2d: np.ndarray,
                    camera_K: np.ndarray, T_world2cam: np.ndarray, fps: float,
-                   smooth_qpos: np.ndarray | None = None) -> ObjectiveReference:
+                   smooth_qpos: np.ndarray | None = None,
+                   camera_travel: np.ndarray | None = None) -> ObjectiveReference:
     """The per-frame targets from a kinematic estimate qpos (T, 55) and its detections.
 
     smooth_qpos (T, 55): a low-passed estimate whose centre of mass gives the velocity target
     (finite differences of a jittery estimate's COM would ask the body to jitter); default qpos.
+    camera_travel (T, 3): see ObjectiveReference (qpos is then the motion in the world, and
+    T_world2cam the camera where it stood at frame 0).
     """
     smooth_com = centre_of_mass(model, qpos if smooth_qpos is None else smooth_qpos)
-    depth = transform_points(T_world2cam, qpos[:, :3])[:, 2]
+    filmed_root = qpos[:, :3] if camera_travel is None else qpos[:, :3] - camera_travel
+    depth = transform_points(T_world2cam, filmed_root)[:, 2]
     focal = 0.5 * (camera_K[0, 0] + camera_K[1, 1])
     landmarks = landmark_sites(model, qpos)
     return ObjectiveReference(
@@ -178,7 +190,8 @@ def make_reference(model: mujoco.MjModel, qpos: np.ndarray, keypoints2d: np.ndar
         keypoints2d=np.asarray(keypoints2d, dtype=float),
         camera_K=np.asarray(camera_K, dtype=float), T_world2cam=np.asarray(T_world2cam, dtype=float),
         metres_per_px=np.maximum(depth, _MIN_DEPTH) / focal, fps=float(fps),
-        feet=root_relative_feet(landmarks, qpos), swing=swing_mask(model, landmarks))
+        feet=root_relative_feet(landmarks, qpos), swing=swing_mask(model, landmarks),
+        camera_travel=None if camera_travel is None else np.asarray(camera_travel, dtype=float))
 
 
 def _cost_com(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history) -> np.ndarray:
@@ -203,7 +216,10 @@ def project(points: np.ndarray, K: np.ndarray, T_world2cam: np.ndarray) -> np.nd
 
 def _cost_reprojection(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, history
                        ) -> np.ndarray:
-    uv = project(s.landmarks[:, 1:], ref.camera_K, ref.T_world2cam)
+    landmarks = s.landmarks[:, 1:]
+    if ref.camera_travel is not None:  # the simulated body as the travelling camera saw it
+        landmarks = landmarks - ref.camera_travel[frames[1:], None, :]
+    uv = project(landmarks, ref.camera_K, ref.T_world2cam)
     kp = ref.keypoints2d[frames[1:]]
     dist = np.linalg.norm(uv - kp[..., :2], axis=-1)  # (B, F-1, 33) px
     per_frame = np.mean(kp[..., 2] * dist, axis=-1) * ref.metres_per_px[frames[1:]]

@@ -43,6 +43,7 @@ from physpose.dynamics.rollout import SimModel, Simulator, Trajectories, make_st
 from physpose.dynamics.spline import KnotGrid
 from physpose.dynamics.stance import flatten_stance_feet
 from physpose.dynamics.stretches import shift_stretches, stretch_shifts, translation_invariant
+from physpose.dynamics.travel import camera_travel, camera_travels
 from physpose.dynamics.balance import balance_plan
 from physpose.dynamics.controller import track_reference
 from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
@@ -97,6 +98,12 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
     num_steps = int(np.ceil(step_position(kin.num_frames - 1, fps, dt) - 1e-9))
     grounded = ground_motion(sim.model, kin.qpos, cfg.ground_snap) if cfg.ground_reference \
         else kin.qpos
+    travel = None
+    if camera_travels(cfg.camera, obs.camera_motion) and translation_invariant(sim.body.scene):
+        # Filmed by a travelling camera: follow the estimate moved on by the camera's travel.
+        travel = camera_travel(sim.model, grounded, fps)
+        grounded = grounded.copy()
+        grounded[:, :3] += travel
     if cfg.flat_stance:
         flat = flatten_stance_feet(sim.model, grounded, fps, sim.body.foot_geom_ids)
         grounded = ground_motion(sim.model, flat, cfg.ground_snap)
@@ -108,7 +115,8 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
     coefs0 = initial_coefficients(grid, step_times, needs.targets[:num_steps])
     frame_steps = np.round(step_position(np.arange(kin.num_frames), fps, dt)).astype(int)
     objective = make_reference(sim.model, grounded, obs.keypoints2d, kin.camera_K,
-                               kin.T_world2cam, fps, smooth_qpos=reference.qpos[frame_steps])
+                               kin.T_world2cam, fps, smooth_qpos=reference.qpos[frame_steps],
+                               camera_travel=travel)
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
                   objective=objective, step_times=step_times, frame_steps=frame_steps,
                   root_residual=needs.root_residual)
@@ -537,10 +545,13 @@ def foot_heights(model: mujoco.MjModel, qpos: np.ndarray, foot_geoms: dict[str, 
     return out
 
 
-def run_inputs(body: Body, kin: KinematicFit, obs: Observations) -> dict:
-    """What a dynamics run depends on besides its config (for the checkpoint key)."""
+def run_inputs(body: Body, kin: KinematicFit, obs: Observations, travels: bool = False) -> dict:
+    """What a dynamics run depends on besides its config (for the checkpoint key); travels:
+    the run follows a travelling camera (travel.py)."""
     inputs = {"qpos": kin.qpos, "fps": kin.fps, "keypoints2d": obs.keypoints2d,
               "camera_K": kin.camera_K, "T_world2cam": kin.T_world2cam, "body_xml": body.xml}
+    if travels:  # since stop 30 (the key of every other run is as before)
+        inputs["camera_travel"] = True
     if body.scene.obstacles:  # since stop 25 the initial targets let the soles push on boxes
         inputs["box_support"] = True
     return inputs
@@ -562,7 +573,9 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
     setup = _setup(sim, kinematic_fit, observations, config)  # the same for every seed
     timing["prepare"] = time.perf_counter() - t0
     run = _run_independent if config.independent else _run_sequential
-    inputs = run_inputs(body, kinematic_fit, observations) if checkpoints else None
+    travel = setup.objective.camera_travel
+    inputs = run_inputs(body, kinematic_fit, observations, travel is not None) \
+        if checkpoints else None
     runs, table = [], []
     with Simulator(sim, config.nthread) as simulator:
         # Candidates: whole-clip runs with seeds seed, seed + 1, ..., each checkpointed as
@@ -602,4 +615,5 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
         landmarks=outputs["landmarks"], com=outputs["com"],
         foot_heights=foot_heights(sim.model, outputs["qpos"], body.foot_geom_ids), ctrl=ctrl,
         windows=records, timings=timing, config=config.identity(), candidates=candidates,
-        reference_residual=residual[setup.frame_steps], stretch_shifts=shifts)
+        reference_residual=residual[setup.frame_steps], stretch_shifts=shifts,
+        camera_travel=travel)

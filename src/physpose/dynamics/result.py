@@ -28,6 +28,10 @@ class PhysicsResult:
     `restarts`: the frames at which the motion restarts from the kinematic estimate.
     stretch_shifts (S, 2): the horizontal shift (m) given to each continuous stretch, split at
     the restarts (DynamicsConfig.place_stretches; empty when not placed).
+    camera_travel (T, 3): where the camera travelled with the person (DynamicsConfig.camera,
+    travel.py), how far it had moved by each frame (m, horizontal, world axes): the simulated
+    motion is where the person went, and the still camera of the kinematic fit sees it moved
+    back by this. None for a camera that stood still.
     """
 
     fps: float
@@ -43,6 +47,7 @@ class PhysicsResult:
     candidates: list[dict] = dataclasses.field(default_factory=list)
     reference_residual: np.ndarray | None = None
     stretch_shifts: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
+    camera_travel: np.ndarray | None = None
 
     @property
     def num_frames(self) -> int:
@@ -52,6 +57,11 @@ class PhysicsResult:
     def restarts(self) -> list[int]:
         """Frames at which the run restarted from the kinematic state (`restart_frames`)."""
         return restart_frames(self.windows)
+
+    def reconstruction_fields(self) -> dict[str, np.ndarray | None]:
+        """The physics fields of a `Reconstruction` (physpose.reconstruction)."""
+        return {"joints_physics": self.joints, "qpos_physics": self.qpos,
+                "landmarks_physics": self.landmarks, "camera_travel_physics": self.camera_travel}
 
     def losses(self) -> dict[str, float]:
         """Final loss terms averaged over windows (unweighted), plus the weighted total."""
@@ -66,7 +76,9 @@ class PhysicsResult:
         """JSON-able record of the run for a reconstruction's meta["dynamics"]."""
         return {"windows": self.windows, "losses": self.losses(), "candidates": self.candidates,
                 "restarts": self.restarts, "stretch_shifts": self.stretch_shifts.tolist(),
-                "reference": self.reference_summary()}
+                "reference": self.reference_summary(),
+                "camera_travelled_m": None if self.camera_travel is None else
+                float(np.linalg.norm(self.camera_travel[-1] - self.camera_travel[0]))}
 
     def reference_summary(self) -> dict[str, float]:
         """Median and 90th percentile over frames of ``reference_residual`` (body weights)."""

@@ -39,8 +39,7 @@ def run_dynamics_variant(obs: Observations, context: VariantContext, kinematic_v
     meta = dict(recon.meta)
     meta.update(variant=name, timings_s={"kinematics": kin_s, "dynamics": phys.timings["total"]},
                 dynamics=phys.meta())
-    return recon.replace(joints_physics=phys.joints, qpos_physics=phys.qpos,
-                         landmarks_physics=phys.landmarks, meta=meta)
+    return recon.replace(**phys.reconstruction_fields(), meta=meta)
 
 
 def _variant(kinematic_variant: str, config: DynamicsConfig, name: str):

@@ -104,17 +104,29 @@ def _restarting(rec: Reconstruction) -> np.ndarray:
     return shown
 
 
+def _filming(rec: Reconstruction, motion: str, t_w2c: np.ndarray, t: int) -> np.ndarray:
+    """The camera (4, 4) that films ``motion`` at frame t: moved along with the person by the
+    camera's travel for the physics where the camera travelled (Reconstruction.as_filmed)."""
+    shift = rec.as_filmed(np.zeros((rec.num_frames, 1, 3)), motion)[t, 0]  # minus the travel
+    moved = t_w2c.copy()
+    moved[:3, 3] += moved[:3, :3] @ shift  # sees x where t_w2c sees x + shift
+    return moved
+
+
 def _draw_motions(scene: _Scene, image: np.ndarray, k: np.ndarray, t_w2c: np.ndarray, t: int,
-                  solids: bool) -> None:
+                  solids: bool, filmed: bool = False) -> None:
+    """Both motions through the camera (k, t_w2c); ``filmed``: t_w2c is the video's camera,
+    which follows a travelling person (`_filming`)."""
     for m in sorted(scene.motions, key=lambda m: m != scene.motions[-1]):
+        t_w2c_m = _filming(scene.rec, m, t_w2c, t) if filmed else t_w2c
         body = scene.bodies[m]
         if solids and body is not None and body.tree.geoms:
             centers, quats = body.geom_poses()
             # The best motion (the last) is filled; the other one is outlined over it.
             alpha = 0.55 if m == scene.motions[-1] else 0.0
-            draw_solids(image, k, t_w2c, scene.samples[m], centers[t], quats[t], COLORS[m],
+            draw_solids(image, k, t_w2c_m, scene.samples[m], centers[t], quats[t], COLORS[m],
                         alpha=alpha)
-        draw_skeleton(image, k, t_w2c, joints_of(scene.rec, m)[t], scene.edges, COLORS[m])
+        draw_skeleton(image, k, t_w2c_m, joints_of(scene.rec, m)[t], scene.edges, COLORS[m])
 
 
 def _video_panel(scene: _Scene, frame: np.ndarray | None, t: int, cfg: OverlayConfig):
@@ -126,7 +138,7 @@ def _video_panel(scene: _Scene, frame: np.ndarray | None, t: int, cfg: OverlayCo
     else:
         image = cv2.resize(frame, (round(w * scale), cfg.height), interpolation=cv2.INTER_AREA)
     k = np.diag([scale, scale, 1.0]) @ scene.rec.camera_K
-    _draw_motions(scene, image, k, scene.cameras[t], t, cfg.solids)
+    _draw_motions(scene, image, k, scene.cameras[t], t, cfg.solids, filmed=True)
     return image
 
 
