@@ -115,15 +115,22 @@ class Reconstruction:
                                 remedy="run `physpose reconstruct` instead of `physpose fit`")
         return self.joints_physics
 
-    def as_filmed(self, points: np.ndarray, motion: str = "best") -> np.ndarray:
-        """Points (T, ..., 3) of a motion ('kinematic', 'physics' or 'best', as in `joints`)
-        where camera_T_world2cam saw them: the physics moved back by the camera's travel where
-        the camera travelled with the person (camera_travel_physics), otherwise as given."""
+    def camera_travel(self, motion: str = "best") -> np.ndarray | None:
+        """(T, 3) m: the camera's travel that a motion ('kinematic', 'physics' or 'best', as in
+        `joints`) was filmed through: camera_travel_physics for the physics where the camera
+        travelled with the person, None otherwise (a still camera)."""
         physics = motion == "physics" or (motion == "best" and self.has_physics)
         if not physics or self.camera_travel_physics is None:
+            return None
+        return np.asarray(self.camera_travel_physics, dtype=float)
+
+    def as_filmed(self, points: np.ndarray, motion: str = "best") -> np.ndarray:
+        """Points (T, ..., 3) of a motion where camera_T_world2cam saw them: moved back by the
+        camera's travel (`camera_travel`) where there is one, otherwise as given."""
+        travel = self.camera_travel(motion)
+        if travel is None:
             return points
         points = np.asarray(points, dtype=float)
-        travel = np.asarray(self.camera_travel_physics, dtype=float)
         return points - travel.reshape((len(travel),) + (1,) * (points.ndim - 2) + (3,))
 
     def replace(self, **changes) -> "Reconstruction":

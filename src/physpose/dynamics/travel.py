@@ -8,10 +8,10 @@ it along the floor, so it strays from such an estimate and restarts.
 
 A foot standing on the floor does not move, so whatever horizontal velocity the estimate gives
 a standing foot is the camera's, reversed. `camera_travel` takes it from the estimate's feet,
-each weighted by how surely it stands (how low its heel and toe are above their standing
-heights), averages it over a fraction of a second (a camera's speed changes slowly, and a
-runner's flight phases have no foot down) and integrates it into the camera's path from the
-first frame. The dynamics then follows the estimate moved on by that path, the motion in the
+each weighted by how surely it stands (how low its heel and toe are, above their standing
+heights and above the other foot's), as a weighted median over a fraction of a second (a
+camera's speed changes slowly, and a runner's flight phases have no foot down), low-passes it
+and integrates it into the camera's path from the first frame. The dynamics then follows the estimate moved on by that path, the motion in the
 world, while the re-projection term moves the simulated body back by it before projecting, as
 the travelling camera saw it (objective.ObjectiveReference.camera_travel).
 """

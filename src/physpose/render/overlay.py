@@ -106,10 +106,12 @@ def _restarting(rec: Reconstruction) -> np.ndarray:
 
 def _filming(rec: Reconstruction, motion: str, t_w2c: np.ndarray, t: int) -> np.ndarray:
     """The camera (4, 4) that films ``motion`` at frame t: moved along with the person by the
-    camera's travel for the physics where the camera travelled (Reconstruction.as_filmed)."""
-    shift = rec.as_filmed(np.zeros((rec.num_frames, 1, 3)), motion)[t, 0]  # minus the travel
+    camera's travel for the physics where the camera travelled (Reconstruction.camera_travel)."""
+    travel = rec.camera_travel(motion)
+    if travel is None:
+        return t_w2c
     moved = t_w2c.copy()
-    moved[:3, 3] += moved[:3, :3] @ shift  # sees x where t_w2c sees x + shift
+    moved[:3, 3] -= moved[:3, :3] @ travel[t]  # sees x where t_w2c sees x - travel
     return moved
 
 
