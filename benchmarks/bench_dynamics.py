@@ -7,7 +7,8 @@ the benchmark needs no evaluation material. The fast preset runs the whole clip;
 preset (2000 iterations x 100 samples per 1 s window) is timed on one 1 s window for a few
 iterations and extrapolated to its 2000 (reported as such). Rollout throughput (one-second
 rollouts per second, two threads, open loop and under balance feedback) is printed for
-reference. Timings on a shared 2-core machine
+reference, and so is the tracking controller's speed (the second start guess of every
+window; seconds of wall time per simulated second). Timings on a shared 2-core machine
 are noisy: compare ratios.
 """
 
@@ -25,7 +26,8 @@ import numpy as np
 from physpose.body import build_body, standing_qpos
 from physpose.dynamics import PRESETS, optimize_dynamics
 from physpose.dynamics.balance import BalanceGains, balance_plan
-from physpose.dynamics.init import Reference
+from physpose.dynamics.controller import track_reference
+from physpose.dynamics.init import Reference, smooth_reference
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.shape import BodyShape
@@ -58,6 +60,18 @@ def rollout_rate(body, batch: int = 32, seconds: float = 1.0, repeats: int = 3,
     return batch * repeats * seconds / elapsed
 
 
+def tracking_cost(body, fit, seconds: float = 1.0, repeats: int = 3) -> float:
+    """Wall seconds per simulated second of the tracking controller following ``fit``."""
+    sim = sim_model(body)
+    steps = int(round(seconds / sim.dt))
+    ref = smooth_reference(fit.qpos, fit.fps, sim.dt, steps, 0.1)
+    state0 = make_state(sim, ref.qpos[0], ref.qvel[0])
+    start = time.perf_counter()
+    for _ in range(repeats):
+        track_reference(sim.model, state0, ref, 0, steps)
+    return (time.perf_counter() - start) / (repeats * seconds)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=4.0, help="clip length (s)")
@@ -73,7 +87,8 @@ def main() -> None:
     out = {"machine": f"{platform.machine()}, {os.cpu_count()} cores (shared)",
            "clip": f"simulated {args.motion}, {video_s:.2f} s at {fit.fps:g} fps",
            "rollouts_per_s": rollout_rate(body),
-           "rollouts_per_s_with_balance": rollout_rate(body, balance=True)}
+           "rollouts_per_s_with_balance": rollout_rate(body, balance=True),
+           "tracking_s_per_simulated_s": tracking_cost(body, fit)}
 
     fast = PRESETS["fast"]
     start = time.perf_counter()
@@ -105,6 +120,7 @@ def main() -> None:
     print(f"{out['clip']}; {out['machine']}")
     print(f"rollouts: {out['rollouts_per_s']:.0f} one-second rollouts/s (2 threads); "
           f"{out['rollouts_per_s_with_balance']:.0f} with balance feedback (20 ms chunks)")
+    print(f"tracking controller: {out['tracking_s_per_simulated_s']:.2f} s per simulated second")
     f = out["fast"]
     print(f"fast preset: {f['wall_s']:.1f} s for {video_s:.2f} s of video = "
           f"{f['wall_s_per_video_s']:.1f} s per second ({f['windows']} windows, "

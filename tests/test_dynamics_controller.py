@@ -67,3 +67,23 @@ def test_a_physically_real_motion_is_tracked_within_two_centimetres(body):
 def test_gains_must_be_positive():
     with pytest.raises(PhysposeError, match="root_weight"):
         ControllerGains(root_weight=0.0)
+
+
+def test_pushes_solve_the_bounded_least_squares():
+    """Eliminating the free accelerations gives the bounded solver's answer."""
+    from scipy.optimize import lsq_linear
+
+    from physpose.dynamics.controller import solve_with_pushes
+
+    rng = np.random.default_rng(3)
+    for rows, n, nl in ((30, 12, 8), (20, 12, 0), (40, 10, 16)):
+        A, B, b = rng.normal(size=(rows, n)), rng.normal(size=(rows, nl)), rng.normal(size=rows)
+        lam, x = solve_with_pushes(A, B, b, 1e-3)
+        lhs = np.vstack([np.hstack([A, B]), np.hstack([np.zeros((nl, n)), 1e-3 * np.eye(nl)])])
+        rhs = np.concatenate([b, np.zeros(nl)])
+        lo = np.concatenate([np.full(n, -np.inf), np.zeros(nl)])
+        ref = lsq_linear(lhs, rhs, bounds=(lo, np.inf), method="bvls", tol=1e-12).x
+        assert (lam >= 0).all()
+        np.testing.assert_allclose(np.concatenate([x, lam]), ref, atol=1e-7)
+        if nl:
+            assert (lam == 0).any() and (lam > 0).any()  # some bounds bind, some do not
