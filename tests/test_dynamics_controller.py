@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.optimize import lsq_linear
 
 from physpose.body import build_body, standing_qpos
-from physpose.dynamics.controller import ControllerGains, track_reference
+from physpose.dynamics.controller import ControllerGains, solve_with_pushes, track_reference
 from physpose.dynamics.init import smooth_reference
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
 from physpose.dynamics.synthetic import simulated_clip
@@ -71,10 +72,6 @@ def test_gains_must_be_positive():
 
 def test_pushes_solve_the_bounded_least_squares():
     """Eliminating the free accelerations gives the bounded solver's answer."""
-    from scipy.optimize import lsq_linear
-
-    from physpose.dynamics.controller import solve_with_pushes
-
     rng = np.random.default_rng(3)
     for rows, n, nl in ((30, 12, 8), (20, 12, 0), (40, 10, 16)):
         A, B, b = rng.normal(size=(rows, n)), rng.normal(size=(rows, nl)), rng.normal(size=rows)
