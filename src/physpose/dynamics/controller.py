@@ -13,8 +13,9 @@ This controller chooses the servo targets at every simulation step from the curr
    accelerations (root errors weigh ``root_weight`` times more than hinge ones). A least-squares
    problem with lam >= 0: x, which is free, is eliminated through a QR factorisation of its
    rows, leaving a small non-negative least squares in lam (scipy ``nnls``), the same solution
-   as a bounded solver over both in half the time (benchmarks/bench_dynamics.py). A contact whose body point the
-   reference lifts more than ``release_height`` above the floor is let go instead of held;
+   as a bounded solver over both in half the time (benchmarks/bench_dynamics.py). A contact
+   whose body point the reference lifts more than ``release_height`` above the floor is let go
+   instead of held;
 3. the hinge rows of ``M x + h - J^T E lam`` are the motor torques, applied through the
    position servos as targets ``q + tau / kp`` (body.py's servo law; its damping is passive
    and part of h).
