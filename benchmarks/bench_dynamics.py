@@ -61,14 +61,16 @@ def rollout_rate(body, batch: int = 32, seconds: float = 1.0, repeats: int = 3,
 
 
 def tracking_cost(body, fit, seconds: float = 1.0, repeats: int = 3) -> float:
-    """Wall seconds per simulated second of the tracking controller following ``fit``."""
+    """Wall seconds per simulated second of the tracking controller following ``fit`` (the
+    fast preset's reference smoothing and controller gains)."""
+    fast = PRESETS["fast"]
     sim = sim_model(body)
     steps = int(round(seconds / sim.dt))
-    ref = smooth_reference(fit.qpos, fit.fps, sim.dt, steps, 0.1)
+    ref = smooth_reference(fit.qpos, fit.fps, sim.dt, steps, fast.reference_knot_spacing)
     state0 = make_state(sim, ref.qpos[0], ref.qvel[0])
     start = time.perf_counter()
     for _ in range(repeats):
-        track_reference(sim.model, state0, ref, 0, steps)
+        track_reference(sim.model, state0, ref, 0, steps, fast.controller)
     return (time.perf_counter() - start) / (repeats * seconds)
 
 
