@@ -9,7 +9,8 @@ import pytest
 
 from physpose.benchmark import VARIANTS, get_variant, register_variant, write_results
 from physpose.benchmark.baseline import level_ground_frame, solve_root_translation
-from physpose.benchmark.material import Clip, MaterialConfig, mocap_clip, uniform_fps
+from physpose.benchmark.material import (Clip, MaterialConfig, crop_mocap, mocap_clip,
+                                         uniform_fps)
 from physpose.benchmark.report import aggregate
 from physpose.benchmark.runner import BenchmarkConfig, results_document, run_clips
 from physpose.benchmark.scoring import TRUTH_ROW
@@ -262,3 +263,35 @@ def test_cli_errors(tmp_path, capsys):
     assert "baseline" in capsys.readouterr().out.split()
     assert main(["benchmark", "--video", str(tmp_path)]) == 2
     assert "--out" in capsys.readouterr().err
+
+
+def test_a_later_segment_is_cut_from_its_start_and_named_by_it():
+    walk = _walk()
+    late = mocap_clip(walk, MaterialConfig(max_seconds=0.4, start_seconds=0.6), name="walk@0.6s")
+    first = int(round(0.6 * walk.fps))
+    assert late.truth.joints.shape[0] == int(round(0.4 * walk.fps))
+    np.testing.assert_allclose(late.truth.joints[0], walk.joints[first])
+    cut = crop_mocap(walk, 10.0, start_seconds=99.0)  # past the end: the last two frames
+    np.testing.assert_array_equal(cut.joints, walk.joints[-2:])
+
+
+def test_the_camera_azimuth_moves_the_virtual_camera():
+    front = mocap_clip(_walk(), MaterialConfig(max_seconds=0.4), name="walk")
+    side = mocap_clip(_walk(), MaterialConfig(max_seconds=0.4, camera_azimuth_deg=90.0),
+                      name="walk")
+    z_front, z_side = front.truth.T_world2cam[2, :3], side.truth.T_world2cam[2, :3]  # view axes
+    angle = np.degrees(np.arccos(np.clip(z_front @ z_side, -1, 1)))
+    assert angle == pytest.approx(60.0, abs=5.0)  # 30 -> 90 degrees about the vertical
+
+
+def test_cli_start_past_a_clips_end_is_a_failure_naming_the_file(tmp_path, monkeypatch):
+    from physpose.benchmark import material as material_module
+    monkeypatch.setattr(material_module, "load_mocap", lambda path, target_fps: _walk())
+    clip_file = tmp_path / "walk.bvh"
+    clip_file.write_text("")
+    out = tmp_path / "out"
+    assert main(["benchmark", "--mocap", str(clip_file), "--start", "60", "--out", str(out)]) == 1
+    doc = json.loads((out / "results.json").read_text())
+    assert doc["config"]["material"]["start_seconds"] == 60.0
+    (failure,) = doc["failures"]
+    assert "walk.bvh" in failure["error"] and "--start" in failure["error"]

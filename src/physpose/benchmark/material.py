@@ -36,6 +36,8 @@ class MaterialConfig:
 
     fps: float = 25.0             # Hz, target analysis rate (the paper's)
     max_seconds: float = 4.0      # s, clip length cap (the paper's clips are 100 frames at 25 Hz)
+    start_seconds: float = 0.0    # s, where each clip begins (later segments: held-out material)
+    camera_azimuth_deg: float = 30.0  # mocap's virtual camera: 0 in front of the subject, 90 left
     known_intrinsics: bool = True   # tell variants the camera K when the material has one
     known_extrinsics: bool = False  # tell variants the camera pose (then ground is not scored)
     known_height: bool = False    # tell variants the person's stature when the material has it
@@ -48,6 +50,12 @@ class MaterialConfig:
         if not (math.isfinite(self.max_seconds) and self.max_seconds > 0):
             raise PhysposeError(f"max_seconds={self.max_seconds} must be > 0",
                                 remedy="pass --max-seconds with a positive number of seconds")
+        if not (math.isfinite(self.start_seconds) and self.start_seconds >= 0):
+            raise PhysposeError(f"start_seconds={self.start_seconds} must be >= 0",
+                                remedy="pass --start with a time in seconds, e.g. --start 4")
+        if not math.isfinite(self.camera_azimuth_deg):
+            raise PhysposeError(f"camera_azimuth_deg={self.camera_azimuth_deg} is not a number",
+                                remedy="pass --camera-azimuth in degrees, e.g. --camera-azimuth 60")
 
 
 @dataclass(frozen=True, eq=False)
@@ -128,19 +136,30 @@ def _is_mocap_clip(path: Path) -> bool:
 
 
 def _clip_end(duration: float, cfg: MaterialConfig) -> float | None:
-    return None if duration <= cfg.max_seconds else cfg.max_seconds
+    end = cfg.start_seconds + cfg.max_seconds
+    return None if duration <= end else end
 
 
 def _observe_config(video: Path, cfg: MaterialConfig) -> ObserveConfig:
     info = probe(video)
+    if cfg.start_seconds >= info.duration:
+        raise PhysposeError(f"the video is {info.duration:.1f} s long; the benchmark's start "
+                            f"{cfg.start_seconds:g} s is past its end", path=video,
+                            remedy="pass a smaller --start, or leave this video out")
     return ObserveConfig(target_fps=uniform_fps(info.fps, cfg.fps),
-                         end=_clip_end(info.duration, cfg))
+                         start=cfg.start_seconds or None, end=_clip_end(info.duration, cfg))
+
+
+def _segment_name(name: str, cfg: MaterialConfig) -> str:
+    """A clip's name, marked with its start time when it does not begin at 0."""
+    return f"{name}@{cfg.start_seconds:g}s" if cfg.start_seconds else name
 
 
 def _video_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:
     start = time.perf_counter()
     obs = observe(path, _observe_config(path, cfg), progress=False)
-    return [Clip(kind="video", name=path.stem, source=str(path), observations=obs,
+    return [Clip(kind="video", name=_segment_name(path.stem, cfg), source=str(path),
+                 observations=obs,
                  context=VariantContext(seed=cfg.seed), truth=None,
                  timings_s={"observe": time.perf_counter() - start})]
 
@@ -157,7 +176,7 @@ def _multiview_clips(folder: Path, cfg: MaterialConfig) -> list[Clip]:
             camera_K=cam.K if cfg.known_intrinsics else None,
             camera_T_world2cam=cam.T_world2cam if cfg.known_extrinsics else None, seed=cfg.seed)
         truth = Truth(joints=ref.joints, T_world2cam=cam.T_world2cam, K=cam.K, dist=cam.dist)
-        clips.append(Clip(kind="multiview", name=f"{folder.name}/{cam.name}",
+        clips.append(Clip(kind="multiview", name=_segment_name(f"{folder.name}/{cam.name}", cfg),
                           source=str(folder), observations=obs, context=context, truth=truth,
                           timings_s=elapsed))
     return clips
@@ -170,7 +189,11 @@ def _mocap_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:
         print(f"benchmark: {path.name}: its first {motion.meta['leading_frames_dropped']} "
               "frame(s) hold a rest pose joined to the motion by a jump; left out",
               file=sys.stderr, flush=True)
-    clip = mocap_clip(motion, cfg, name=path.stem)
+    if cfg.start_seconds and motion.num_frames <= round(cfg.start_seconds * motion.fps) + 1:
+        raise PhysposeError(f"the clip is {motion.num_frames / motion.fps:.1f} s long; the "
+                            f"benchmark's start {cfg.start_seconds:g} s leaves under two frames",
+                            path=path, remedy="pass a smaller --start, or leave this clip out")
+    clip = mocap_clip(motion, cfg, name=_segment_name(path.stem, cfg))
     clip.timings_s["load"] = time.perf_counter() - start - clip.timings_s["simulate"]
     return [clip]
 
@@ -178,9 +201,10 @@ def _mocap_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:
 def mocap_clip(motion: MocapClip, cfg: MaterialConfig, name: str) -> Clip:
     """A benchmark clip from ground-truth motion: cropped, then seen by the detector simulator."""
     start = time.perf_counter()
-    motion = crop_mocap(motion, cfg.max_seconds)
-    detector = DetectorSimConfig.noiseless(seed=cfg.seed) if cfg.noiseless \
-        else DetectorSimConfig(seed=cfg.seed)
+    motion = crop_mocap(motion, cfg.max_seconds, cfg.start_seconds)
+    camera = dict(seed=cfg.seed, azimuth_deg=cfg.camera_azimuth_deg)
+    detector = DetectorSimConfig.noiseless(**camera) if cfg.noiseless \
+        else DetectorSimConfig(**camera)
     capture = simulate_detections(motion, detector)
     context = VariantContext(
         camera_K=capture.camera_K if cfg.known_intrinsics else None,
@@ -193,10 +217,13 @@ def mocap_clip(motion: MocapClip, cfg: MaterialConfig, name: str) -> Clip:
                 timings_s={"simulate": time.perf_counter() - start})
 
 
-def crop_mocap(clip: MocapClip, max_seconds: float) -> MocapClip:
-    """The first `max_seconds` of a clip (at least two frames)."""
+def crop_mocap(clip: MocapClip, max_seconds: float, start_seconds: float = 0.0) -> MocapClip:
+    """At most `max_seconds` of a clip from `start_seconds` on (at least two frames; a start
+    past the end keeps the last two)."""
+    first = min(int(round(start_seconds * clip.fps)), clip.num_frames - 2)
     n = max(2, int(round(max_seconds * clip.fps)))
-    if clip.num_frames <= n:
+    if first <= 0 and clip.num_frames <= n:
         return clip
-    return dataclasses.replace(clip, **{k: getattr(clip, k)[:n] for k in
+    rows = slice(max(first, 0), max(first, 0) + n)
+    return dataclasses.replace(clip, **{k: getattr(clip, k)[rows] for k in
                                         ("joints", "head_top", "head_rot", "hand_rot")})
