@@ -9,8 +9,8 @@ import pytest
 
 from physpose.benchmark import VARIANTS, get_variant, register_variant, write_results
 from physpose.benchmark.baseline import level_ground_frame, solve_root_translation
-from physpose.benchmark.material import (Clip, MaterialConfig, crop_mocap, mocap_clip,
-                                         uniform_fps)
+from physpose.benchmark.material import (Clip, MaterialConfig, _observe_config, crop_mocap,
+                                         mocap_clip, uniform_fps)
 from physpose.benchmark.report import aggregate
 from physpose.benchmark.runner import BenchmarkConfig, results_document, run_clips
 from physpose.benchmark.scoring import TRUTH_ROW
@@ -20,6 +20,7 @@ from physpose.joints import JOINT_INDEX, JOINT_NAMES, LANDMARK_INDEX, joints_fro
 from physpose.metrics import project, transform_points
 from physpose.mocap import MocapClip
 from physpose.reconstruction import Reconstruction
+from synthetic_video import make_video
 
 FPS = 25.0
 
@@ -295,3 +296,13 @@ def test_cli_start_past_a_clips_end_is_a_failure_naming_the_file(tmp_path, monke
     assert doc["config"]["material"]["start_seconds"] == 60.0
     (failure,) = doc["failures"]
     assert "walk.bvh" in failure["error"] and "--start" in failure["error"]
+
+
+def test_a_video_segment_is_observed_from_its_start(tmp_path):
+    video = make_video(tmp_path / "v.mp4", n_frames=60, fps=10.0)  # 6 s
+    cfg = _observe_config(video, MaterialConfig(start_seconds=1.5, max_seconds=2.0))
+    assert (cfg.start, cfg.end) == (1.5, 3.5)
+    whole = _observe_config(video, MaterialConfig(max_seconds=10.0))
+    assert (whole.start, whole.end) == (None, None)
+    with pytest.raises(PhysposeError, match="past its end"):
+        _observe_config(video, MaterialConfig(start_seconds=6.5))
