@@ -37,7 +37,7 @@ class MaterialConfig:
     fps: float = 25.0             # Hz, target analysis rate (the paper's)
     max_seconds: float = 4.0      # s, clip length cap (the paper's clips are 100 frames at 25 Hz)
     start_seconds: float = 0.0    # s, where each clip begins (later segments: held-out material)
-    camera_azimuth_deg: float = 30.0  # mocap's virtual camera: 0 in front of the subject, 90 left
+    camera_azimuth_deg: float = DetectorSimConfig.azimuth_deg  # mocap's camera, deg (0: in front)
     known_intrinsics: bool = True   # tell variants the camera K when the material has one
     known_extrinsics: bool = False  # tell variants the camera pose (then ground is not scored)
     known_height: bool = False    # tell variants the person's stature when the material has it
@@ -159,8 +159,7 @@ def _video_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:
     start = time.perf_counter()
     obs = observe(path, _observe_config(path, cfg), progress=False)
     return [Clip(kind="video", name=_segment_name(path.stem, cfg), source=str(path),
-                 observations=obs,
-                 context=VariantContext(seed=cfg.seed), truth=None,
+                 observations=obs, context=VariantContext(seed=cfg.seed), truth=None,
                  timings_s={"observe": time.perf_counter() - start})]
 
 
@@ -220,10 +219,10 @@ def mocap_clip(motion: MocapClip, cfg: MaterialConfig, name: str) -> Clip:
 def crop_mocap(clip: MocapClip, max_seconds: float, start_seconds: float = 0.0) -> MocapClip:
     """At most `max_seconds` of a clip from `start_seconds` on (at least two frames; a start
     past the end keeps the last two)."""
-    first = min(int(round(start_seconds * clip.fps)), clip.num_frames - 2)
+    first = max(0, min(int(round(start_seconds * clip.fps)), clip.num_frames - 2))
     n = max(2, int(round(max_seconds * clip.fps)))
-    if first <= 0 and clip.num_frames <= n:
+    if first == 0 and clip.num_frames <= n:
         return clip
-    rows = slice(max(first, 0), max(first, 0) + n)
+    rows = slice(first, first + n)
     return dataclasses.replace(clip, **{k: getattr(clip, k)[rows] for k in
                                         ("joints", "head_top", "head_rot", "hand_rot")})
