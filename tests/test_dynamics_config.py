@@ -52,3 +52,11 @@ def test_a_zero_swing_weight_keeps_the_keys_from_before_the_term():
     assert set(FULL_OBJECTIVE.identity()["weights"]) == {"com", "pose", "reprojection", "prior",
                                                           "tv", "lim"}
     assert PRESETS["fast"].identity()["weights"]["swing"] == PRESETS["fast"].weights.swing
+
+
+def test_swing_confidence_is_in_the_key_only_where_it_changes_the_runs():
+    """Switched off, or without a swing term, the runs are those from before the setting."""
+    fast = PRESETS["fast"]
+    assert fast.swing_confidence and fast.identity()["swing_confidence"] is True
+    assert "swing_confidence" not in dataclasses.replace(fast, swing_confidence=False).identity()
+    assert "swing_confidence" not in FULL_OBJECTIVE.identity()

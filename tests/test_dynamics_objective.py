@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 from physpose.body import build_body, standing_qpos
-from physpose.dynamics.objective import (TERMS, ObjectiveWeights, evaluate_terms, invalid_from,
-                                         joint_quaternions, make_reference, project, total)
+from physpose.dynamics.objective import (FOOT_LANDMARKS, TERMS, ObjectiveWeights, evaluate_terms,
+                                         invalid_from, joint_quaternions, make_reference, project,
+                                         total)
 from physpose.dynamics.rollout import FrameSamples
 from physpose.dynamics.synthetic import virtual_camera
 from physpose.dynamics.windows import Scores, ranked_fitness
@@ -140,6 +141,27 @@ def test_swing_term_follows_the_lifted_foot_but_not_the_root_or_standing_feet(st
     swing_frames = ref.swing[1:, 0].sum()
     assert evaluate_terms(samples_of(body, lowered), ref, frames)["swing"][0] == pytest.approx(
         0.05 * swing_frames / (FRAMES - 1), rel=1e-6)
+
+
+def test_swing_confidence_asks_less_of_a_foot_the_detector_barely_sees(stepping):
+    """With swing_confidence, a swing foot-frame weighs its ankle, heel and toe detections'
+    mean confidence: a lowered swing foot costs in proportion, per foot and frame."""
+    body, step, ref = stepping
+    K, T = virtual_camera()
+    keypoints = ref.keypoints2d.copy()
+    left = list(FOOT_LANDMARKS[0])
+    keypoints[:, left, 2] = 0.9
+    keypoints[-2:, left, 2] = [0.0, 0.3, 0.6]  # the last two frames barely seen
+    weighted = make_reference(body.model, step, keypoints, K, T, FPS, swing_confidence=True)
+    expected = ref.swing[:, 0] * keypoints[:, left, 2].mean(axis=-1)
+    np.testing.assert_allclose(weighted.swing[:, 0], expected)
+    assert not weighted.swing[:, 1].any()  # a standing foot stays unweighted at any confidence
+    frames = np.arange(FRAMES)
+    lowered = step.copy()
+    lowered[:, 2] -= 0.05
+    cost = evaluate_terms(samples_of(body, lowered), weighted, frames)["swing"][0]
+    assert cost == pytest.approx(0.05 * expected[1:].sum() / (FRAMES - 1), rel=1e-6)
+    assert cost < evaluate_terms(samples_of(body, lowered), ref, frames)["swing"][0]
 
 
 def test_weights_skip_terms_and_total_is_the_weighted_sum(scene):

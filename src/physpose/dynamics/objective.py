@@ -31,9 +31,11 @@ over frames; with one window length that is the same up to a constant factor). U
   their heights in the standing pose), the mean distance (m) of the simulated ankle, heel and
   toe landmarks to the reference's; the horizontal part relative to the root, so the term
   shapes the step and not where the body is, the vertical part absolute, so the foot lifts and
-  lands when the estimate's does. Summed over the feet, averaged over frames. Standing feet
-  are left to the simulation: the estimate's standing feet slide, and following them would
-  slide the simulated ones (docs/dynamics.md, Swing feet).
+  lands when the estimate's does. Summed over the feet, averaged over frames; with
+  ``make_reference(swing_confidence=True)`` each foot-frame is weighted by the detections' mean
+  confidence of that foot's ankle, heel and toe (a step the detector barely sees is asked for
+  less). Standing feet are left to the simulation: the estimate's standing feet slide, and
+  following them would slide the simulated ones (docs/dynamics.md, Swing feet).
 
 A sample whose simulation broke, whose root strays more than ``max_root_distance`` from the
 kinematic root, or that sinks a landmark more than ``max_penetration`` below the floor scores
@@ -97,7 +99,8 @@ class ObjectiveReference:
     com (T, 3) m; com_velocity (T-1, 3) m/s between consecutive frames; keypoints2d (T, 33, 3) px + confidence; camera_K (3, 3);
     T_world2cam (4, 4); metres_per_px (T,) at the kinematic root's depth; fps Hz.
     feet (T, 2, 3, 3) m: each foot's ankle, heel and toe landmarks (FOOT_LANDMARKS), x and y
-    relative to the root; swing (T, 2) bool: the foot is in swing (the ``swing`` term).
+    relative to the root; swing (T, 2): the ``swing`` term's weight of each foot, 0 where it
+    stands, 1 (or the detections' confidence in it) where it is in swing.
     camera_travel (T, 3) m: where the camera travelled with the person (travel.py), how far it
     had moved by each frame; the ``reprojection`` term sees the simulated body moved back by
     it. None for a still camera.
@@ -156,6 +159,17 @@ def swing_mask(model: mujoco.MjModel, landmarks: np.ndarray) -> np.ndarray:
     return np.stack([lifted[:, heel] & lifted[:, toe] for _, heel, toe in FOOT_LANDMARKS], axis=-1)
 
 
+def swing_weights(swing: np.ndarray, keypoints2d: np.ndarray | None) -> np.ndarray:
+    """(T, 2) the ``swing`` term's weights: the swing mask (T, 2) as 0/1, times the mean
+    detection confidence of each foot's ankle, heel and toe (keypoints2d (T, 33, 3)) if given."""
+    weights = np.asarray(swing, dtype=float)
+    if keypoints2d is None:
+        return weights
+    kp = np.asarray(keypoints2d, dtype=float)
+    confidence = np.stack([kp[:, list(foot), 2].mean(axis=-1) for foot in FOOT_LANDMARKS], -1)
+    return weights * np.clip(confidence, 0.0, 1.0)
+
+
 def centre_of_mass(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
     """Whole-body centre of mass (T, 3) m for qpos (T, 55)."""
     data = mujoco.MjData(model)
@@ -171,26 +185,30 @@ def centre_of_mass(model: mujoco.MjModel, qpos: np.ndarray) -> np.ndarray:
 def make_reference(model: mujoco.MjModel, qpos: np.ndarray, keypoints2d: np.ndarray,
                    camera_K: np.ndarray, T_world2cam: np.ndarray, fps: float,
                    smooth_qpos: np.ndarray | None = None,
-                   camera_travel: np.ndarray | None = None) -> ObjectiveReference:
+                   camera_travel: np.ndarray | None = None,
+                   swing_confidence: bool = False) -> ObjectiveReference:
     """The per-frame targets from a kinematic estimate qpos (T, 55) and its detections.
 
     smooth_qpos (T, 55): a low-passed estimate whose centre of mass gives the velocity target
     (finite differences of a jittery estimate's COM would ask the body to jitter); default qpos.
     camera_travel (T, 3): see ObjectiveReference (qpos is then the motion in the world, and
     T_world2cam the camera where it stood at frame 0).
+    swing_confidence: weight each swing foot-frame by the detections' mean confidence of the
+    foot's ankle, heel and toe (`swing_weights`).
     """
     smooth_com = centre_of_mass(model, qpos if smooth_qpos is None else smooth_qpos)
     filmed_root = qpos[:, :3] if camera_travel is None else qpos[:, :3] - camera_travel
     depth = transform_points(T_world2cam, filmed_root)[:, 2]
     focal = 0.5 * (camera_K[0, 0] + camera_K[1, 1])
     landmarks = landmark_sites(model, qpos)
+    swing = swing_weights(swing_mask(model, landmarks), keypoints2d if swing_confidence else None)
     return ObjectiveReference(
         qpos=np.asarray(qpos, dtype=float), quats=joint_quaternions(qpos),
         com=centre_of_mass(model, qpos), com_velocity=np.diff(smooth_com, axis=0) * fps,
         keypoints2d=np.asarray(keypoints2d, dtype=float),
         camera_K=np.asarray(camera_K, dtype=float), T_world2cam=np.asarray(T_world2cam, dtype=float),
         metres_per_px=np.maximum(depth, _MIN_DEPTH) / focal, fps=float(fps),
-        feet=root_relative_feet(landmarks, qpos), swing=swing_mask(model, landmarks),
+        feet=root_relative_feet(landmarks, qpos), swing=swing,
         camera_travel=None if camera_travel is None else np.asarray(camera_travel, dtype=float))
 
 

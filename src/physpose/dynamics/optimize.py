@@ -116,7 +116,7 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
     frame_steps = np.round(step_position(np.arange(kin.num_frames), fps, dt)).astype(int)
     objective = make_reference(sim.model, grounded, obs.keypoints2d, kin.camera_K,
                                kin.T_world2cam, fps, smooth_qpos=reference.qpos[frame_steps],
-                               camera_travel=travel)
+                               camera_travel=travel, swing_confidence=cfg.swing_confidence)
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
                   objective=objective, step_times=step_times, frame_steps=frame_steps,
                   root_residual=needs.root_residual)
