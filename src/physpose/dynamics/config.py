@@ -69,7 +69,8 @@ class DynamicsConfig:
         did not lower the restarts or the image error (docs/dynamics.md).
     swing_confidence: weight the ``swing`` term, foot by foot and frame by frame, by the
         detections' mean confidence of the foot's ankle, heel and toe (a step the detector
-        barely sees is asked for less; measured in docs/dynamics.md, Swing feet).
+        barely sees is asked for less; measured in docs/dynamics.md, Swing feet weighted by
+        the detector's confidence).
     nthread: rollout threads (does not change results).
     """
 
@@ -173,7 +174,7 @@ PRESETS: dict[str, DynamicsConfig] = {
     # Swing feet (a term of physpose's own, weight 12): on motion capture under two seeds it
     # lowered MPJPE-G by about 8 mm and the velocity error by 0.04-0.05 m/s, the feet sliding a
     # little more; on pose2sim MPJPE-PA rose by 2-3 mm, skate fell (docs/dynamics.md, Swing feet).
-    # Its swing feet weighted by the detections' confidence in them (swing_confidence, a field
+    # Its swing feet weighted by the detections' confidence in them (swing_confidence, on by
     # default): on pose2sim MPJPE-G fell on all four views (-5.0 +- 1.5 mm), motion capture
     # unchanged within its noise (docs/dynamics.md, Swing feet weighted by the detector's
     # confidence).
