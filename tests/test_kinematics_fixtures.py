@@ -3,6 +3,7 @@ seen as perfect (or noisy) MediaPipe-style observations."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -81,12 +82,16 @@ def walking_qpos(shape: BodyShape, frames: int, fps: float = 25.0, speed: float 
 def synthetic_clip(frames: int = 12, *, noise_px: float = 0.0, noise_3d: float = 0.0,
                    seed: int = 0, shape: BodyShape | None = None,
                    T_world2cam: np.ndarray | None = None, with_K: bool = True,
-                   fps: float = 25.0) -> SyntheticClip:
+                   fps: float = 25.0,
+                   edit_qpos: Callable[[np.ndarray], np.ndarray] | None = None) -> SyntheticClip:
     """A walking body seen by a static camera, as Observations (world landmarks in the ray
-    frame of the hips, like MediaPipe's, with the default fit configuration)."""
+    frame of the hips, like MediaPipe's, with the default fit configuration). edit_qpos
+    changes the walk's (T, 55) qpos before it is seen (e.g. to raise the arms)."""
     rng = np.random.default_rng(seed)
     shape = shape or BodyShape.from_height(1.75)
     q = walking_qpos(shape, frames, fps)
+    if edit_qpos is not None:
+        q = edit_qpos(q.copy())
     K = np.array([[FOCAL, 0.0, IMAGE_SIZE[0] / 2], [0.0, FOCAL, IMAGE_SIZE[1] / 2],
                   [0.0, 0.0, 1.0]])
     if T_world2cam is None:

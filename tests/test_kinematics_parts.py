@@ -41,6 +41,26 @@ def test_inverse_kinematics_of_everyday_poses():
     assert np.median(err) < 0.02 and np.percentile(err, 90) < 0.06, np.median(err)
 
 
+def test_inverse_kinematics_of_arms_raised_overhead():
+    """Shoulders abducted past the horizontal (valid, within the limits) exist only in the
+    second Euler form; the IK must not clip the first form's out-of-range angles instead."""
+    shape = BodyShape.from_height(1.75)
+    t = 30
+    angles = np.zeros((t, NUM_DOF))
+    raise_ = np.radians(np.linspace(30.0, 160.0, t))  # abduction through the horizontal
+    for side, sign in (("l", 1.0), ("r", -1.0)):
+        angles[:, DOF_NAMES.index(f"{side}_shoulder_x")] = sign * raise_
+        angles[:, DOF_NAMES.index(f"{side}_elbow_y")] = -0.4
+    R = np.tile(np.eye(3), (t, 1, 1))
+    _, landmarks = fk(shape.bones(), np.zeros((t, 3)), R, angles)
+    R2, angles2 = inverse_kinematics(landmarks, shape.bones())
+    _, back = fk(shape.bones(), np.zeros((t, 3)), R2, angles2)
+    wrists = [LANDMARK_INDEX["left_wrist"], LANDMARK_INDEX["right_wrist"]]
+    assert np.linalg.norm(back - landmarks, axis=-1)[:, wrists].max() < 0.03
+    # One form per stretch of frames: no 180-degree jumps in the recovered angles.
+    assert np.abs(np.diff(angles2, axis=0)).max() < 0.5
+
+
 def test_rotation_vector_matrix():
     v = np.array([[0.0, 0.0, 0.0], [0.3, -0.2, 0.5], [1e-6, 0.0, 0.0]])
     assert np.allclose(np.asarray(rotvec_matrix(v)), Rotation.from_rotvec(v).as_matrix(),

@@ -136,11 +136,63 @@ def segment_rotations(landmarks: np.ndarray, bones: np.ndarray) -> np.ndarray:
     return rot
 
 
+_BRANCH_STEP_WEIGHT = 0.25  # cost of a radian of change between frames (per rad outside limits)
+_BRANCH_TOLERANCE = 0.6     # rad, the most the second form may lie outside the limits
+
+
+def _wrap(angles: np.ndarray) -> np.ndarray:
+    return (angles + np.pi) % (2 * np.pi) - np.pi
+
+
+def _second_form(angles: np.ndarray) -> np.ndarray:
+    """(a, b, c) -> (a + pi, pi - b, c + pi), wrapped: the same joint rotation (..., 3)."""
+    return _wrap(angles * [1.0, -1.0, 1.0] + np.pi)
+
+
+def _branches(primary: np.ndarray) -> np.ndarray:
+    """Which form of each joint's rotation to use: (T, 16) bool, True for the second form.
+
+    Ry(a) Rx(b) Rz(c) is also Ry(a + pi) Rx(pi - b) Rz(c + pi). The first form has |b| <= 90
+    degrees; only the second is within the limits of a shoulder abducted past the horizontal
+    (arms raised overhead). Per joint, the forms are chosen over time (Viterbi, two states) to
+    minimise the angles outside the limits plus _BRANCH_STEP_WEIGHT x the change from frame
+    to frame. The second form is used only where it is within _BRANCH_TOLERANCE of the limits
+    (not for a foot or hand triangle flipped by landmark noise, which no form fits), and only
+    where the first stays out of them long enough to pay for the change (not for one frame
+    whose twist the landmarks got wrong).
+    """
+    forms = np.stack([primary, _second_form(primary)], axis=2)  # (T, J, 2, 3)
+    lo, hi = DOF_LIMITS[:, 0].reshape(-1, 1, 3), DOF_LIMITS[:, 1].reshape(-1, 1, 3)
+    outside = (np.maximum(lo - forms, 0.0) + np.maximum(forms - hi, 0.0)).sum(-1)  # (T, J, 2)
+    outside[..., 1] = np.where(outside[..., 1] > _BRANCH_TOLERANCE, 1e6, outside[..., 1])
+    cost = outside[0]
+    back = np.zeros(outside.shape, dtype=int)
+    for t in range(1, len(forms)):
+        # step[j, previous form, form]
+        step = np.abs(_wrap(forms[t][:, None] - forms[t - 1][:, :, None])).sum(-1)
+        total = cost[:, :, None] + _BRANCH_STEP_WEIGHT * step
+        back[t] = total.argmin(axis=1)
+        cost = total.min(axis=1) + outside[t]
+    choice = np.zeros(outside.shape[:2], dtype=int)
+    choice[-1] = cost.argmin(axis=1)
+    for t in range(len(forms) - 1, 0, -1):
+        choice[t - 1] = back[t][np.arange(choice.shape[1]), choice[t]]
+    return choice.astype(bool)
+
+
 def angles_from_rotations(rot: np.ndarray) -> np.ndarray:
-    """Hinge angles (T, 48), clipped to the joint limits, from segment orientations (T, 17, 3, 3)."""
+    """Hinge angles (T, 48), clipped to the joint limits, from segment orientations (T, 17, 3, 3).
+
+    Each joint's rotation is decomposed in the form `_branches` picks (arms raised overhead
+    need the second one); where neither form is within the limits (a foot or hand triangle
+    flipped by landmark noise), the angles are clipped.
+    """
     parents = np.asarray(PARENTS[1:])
     local = np.einsum("tsji,tsjk->tsik", rot[:, parents], rot[:, 1:])
-    return np.clip(angles_from_matrices(local), DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])
+    primary = angles_from_matrices(local).reshape(len(rot), -1, 3)
+    second = _branches(primary)[..., None]
+    angles = np.where(second, _second_form(primary), primary).reshape(len(rot), -1)
+    return np.clip(angles, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])
 
 
 def inverse_kinematics(landmarks: np.ndarray, bones: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
