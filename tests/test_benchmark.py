@@ -12,7 +12,7 @@ from physpose.benchmark.baseline import level_ground_frame, solve_root_translati
 from physpose.benchmark.material import (Clip, MaterialConfig, _observe_config, crop_mocap,
                                          mocap_clip, uniform_fps)
 from physpose.benchmark.report import aggregate
-from physpose.benchmark.runner import BenchmarkConfig, results_document, run_clips
+from physpose.benchmark.runner import BenchmarkConfig, results_document, run_clips, run_variant
 from physpose.benchmark.scoring import TRUTH_ROW
 from physpose.cli import main
 from physpose.errors import PhysposeError
@@ -81,9 +81,10 @@ def test_cli_noiseless_flag_reaches_the_material(tmp_path, monkeypatch):
     clip_file.write_text("")  # exists; the fake runner does not read it
     assert main(["benchmark", "--mocap", str(clip_file), "--noiseless",
                  "--out", str(tmp_path / "out")]) == 0
-    assert seen["cfg"].material.noiseless
-    assert main(["benchmark", "--mocap", str(clip_file), "--out", str(tmp_path / "out")]) == 0
-    assert not seen["cfg"].material.noiseless
+    assert seen["cfg"].material.noiseless and not seen["cfg"].material.truth_input
+    assert main(["benchmark", "--mocap", str(clip_file), "--truth-input",
+                 "--out", str(tmp_path / "out")]) == 0
+    assert not seen["cfg"].material.noiseless and seen["cfg"].material.truth_input
 
 
 def _oracle(truth_clip: Clip, yaw_deg: float = 40.0):
@@ -306,3 +307,35 @@ def test_a_video_segment_is_observed_from_its_start(tmp_path):
     assert (whole.start, whole.end) == (None, None)
     with pytest.raises(PhysposeError, match="past its end"):
         _observe_config(video, MaterialConfig(start_seconds=6.5))
+
+
+@pytest.fixture(scope="module")
+def truth_clip() -> Clip:
+    return mocap_clip(_walk(), MaterialConfig(max_seconds=0.4, noiseless=True, truth_input=True),
+                      name="walk")
+
+
+def test_truth_input_reaches_only_the_context_it_is_asked_for(clip, truth_clip):
+    assert clip.context.truth_landmarks is None and clip.context.truth_T_world2cam is None
+    assert truth_clip.context.truth_landmarks.shape == (10, 33, 3)
+    np.testing.assert_allclose(truth_clip.context.truth_T_world2cam, truth_clip.truth.T_world2cam)
+
+
+def test_truth_variants_refuse_clips_without_the_truth(clip):
+    for name in ("truth-ik", "dynamics-truth"):
+        with pytest.raises(PhysposeError, match="--truth-input"):
+            get_variant(name)(clip.observations, clip.context)
+
+
+def test_truth_ik_puts_the_recorded_motion_onto_the_body(truth_clip):
+    record = run_variant("truth-ik", truth_clip)
+    # The stick figure is not physpose's skeleton, so IK cannot match it exactly.
+    assert record["metrics"]["mpjpe_g_mm"] < 30.0
+    assert record["metrics"]["mpjpe_2d_px"] < 10.0
+
+
+def test_dynamics_truth_follows_the_truth_with_physics(truth_clip):
+    record = run_variant("dynamics-truth", truth_clip)
+    assert record["metrics"]["restarts"] == 0.0
+    assert record["metrics"]["fallen_pct"] == 0.0
+    assert record["metrics"]["mpjpe_g_mm"] < 150.0

@@ -43,6 +43,7 @@ class MaterialConfig:
     known_height: bool = False    # tell variants the person's stature when the material has it
     seed: int = 0                 # detector simulator seed
     noiseless: bool = False       # mocap seen by a detector without noise or biases (an oracle)
+    truth_input: bool = False     # give variants the mocap truth (an oracle, benchmark/oracle.py)
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fps) and self.fps > 0):
@@ -208,7 +209,9 @@ def mocap_clip(motion: MocapClip, cfg: MaterialConfig, name: str) -> Clip:
     context = VariantContext(
         camera_K=capture.camera_K if cfg.known_intrinsics else None,
         camera_T_world2cam=capture.camera_T_world2cam if cfg.known_extrinsics else None,
-        person_height=body_height(motion) if cfg.known_height else None, seed=cfg.seed)
+        person_height=body_height(motion) if cfg.known_height else None, seed=cfg.seed,
+        truth_landmarks=capture.landmarks if cfg.truth_input else None,
+        truth_T_world2cam=capture.camera_T_world2cam if cfg.truth_input else None)
     truth = Truth(joints=capture.joints, T_world2cam=capture.camera_T_world2cam,
                   K=capture.camera_K)
     return Clip(kind="mocap", name=name, source=motion.source,

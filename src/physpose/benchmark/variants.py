@@ -23,6 +23,7 @@ PROVIDERS: list[str] = [
     "physpose.benchmark.baseline",
     "physpose.kinematics.variants",
     "physpose.dynamics.variants",
+    "physpose.benchmark.oracle",
 ]
 
 
@@ -34,6 +35,9 @@ class VariantContext:
     camera_T_world2cam: np.ndarray | None = None  # (4, 4) known extrinsics (world z up, floor z=0)
     person_height: float | None = None            # m, the person's stature when known
     seed: int = 0                                 # for variants that sample
+    # Oracle, for the diagnostic variants of benchmark/oracle.py only (MaterialConfig.truth_input):
+    truth_landmarks: np.ndarray | None = None     # (T, 33, 3) the truth's landmarks, world, m
+    truth_T_world2cam: np.ndarray | None = None   # (4, 4) the camera in the truth's world
 
 
 VariantFn = Callable[[Observations, VariantContext], Reconstruction]

@@ -51,6 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--noiseless", action="store_true",
                    help="simulate motion-capture detections without noise or biases: an oracle "
                         "input, so what a variant still loses is its own error")
+    p.add_argument("--truth-input", action="store_true",
+                   help="give variants the motion-capture truth: only the diagnostic variants "
+                        "truth-ik and dynamics-truth read it (how well the body and the physics "
+                        "follow a motion a person really made)")
     p.add_argument("--out", type=Path, help="output folder for results.json and results.md")
     p.set_defaults(func=run)
 
@@ -93,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
                                                   camera_azimuth_deg=args.camera_azimuth,
                                                   known_extrinsics=args.known_extrinsics,
                                                   known_height=args.known_height,
-                                                  seed=args.seed, noiseless=args.noiseless))
+                                                  seed=args.seed, noiseless=args.noiseless,
+                                                  truth_input=args.truth_input))
     command = shlex.join(["physpose", *sys.argv[1:]]) if sys.argv[1:2] == ["benchmark"] \
         else "physpose benchmark"
     doc = run_benchmark(materials, cfg, skipped=skipped, command=command)

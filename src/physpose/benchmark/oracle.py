@@ -1,0 +1,89 @@
+"""Diagnostic variants fed the ground truth itself (motion capture with `--truth-input` only).
+
+``truth-ik`` puts the recorded motion onto physpose's body: bone lengths measured on the
+truth's 33 synthesised landmarks, then inverse kinematics of those landmarks. What it scores
+is the body's own representation error. ``dynamics-truth`` runs the trajectory optimisation
+(default preset) with that motion as its kinematic input, so what it loses is the physics
+stage's own error, not the estimate's. Combine with ``--noiseless`` to give the image term
+clean detections too. These are oracles: they answer "how well can this body and search
+follow a motion a person really made", they are not estimators.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from physpose.benchmark.variants import VariantContext, register_variant
+from physpose.body import build_body
+from physpose.errors import PhysposeError
+from physpose.fk import fk, fk_mujoco
+from physpose.kinematics.ik import inverse_kinematics
+from physpose.kinematics.result import KinematicFit
+from physpose.observations import Observations
+from physpose.reconstruction import Reconstruction
+from physpose.shape import BodyShape, bone_lengths_from_landmarks
+
+
+def truth_on_body(landmarks: np.ndarray, fps: float, camera_K: np.ndarray,
+                  T_world2cam: np.ndarray, mass: float | None = None) -> KinematicFit:
+    """The motion of world landmarks (T, 33, 3) as a kinematic fit of physpose's body.
+
+    The shape comes from bone lengths measured on the landmarks (mass from the stature's
+    average build when None); the pose from inverse kinematics, root placed where it best
+    matches the landmarks (median offset over the 33).
+    """
+    shape = BodyShape.from_bone_lengths(bone_lengths_from_landmarks(landmarks), mass=mass)
+    bones = shape.bones()
+    root_rot, angles = inverse_kinematics(landmarks, bones)
+    _, relative = fk(bones, np.zeros((len(landmarks), 3)), root_rot, angles)
+    root_pos = np.median(landmarks - np.asarray(relative), axis=1)
+    quat_wxyz = Rotation.from_matrix(root_rot).as_quat()[:, [3, 0, 1, 2]]
+    qpos = np.concatenate([root_pos, quat_wxyz, angles], axis=1)
+    joints, sites = fk_mujoco(build_body(shape), qpos)
+    return KinematicFit(fps=fps, shape=shape, qpos=qpos, joints=joints, landmarks=sites,
+                        camera_K=np.asarray(camera_K, float),
+                        T_world2cam=np.asarray(T_world2cam, float), variant="truth",
+                        ground_estimated=False)
+
+
+def _truth_fit(obs: Observations, context: VariantContext, name: str) -> KinematicFit:
+    if context.truth_landmarks is None or context.camera_K is None \
+            or context.truth_T_world2cam is None:
+        raise PhysposeError(f"variant {name} needs the ground truth, which this clip does not "
+                            "give variants", path=obs.source,
+                            remedy="run it on motion capture with --truth-input")
+    return truth_on_body(context.truth_landmarks, obs.fps, context.camera_K,
+                         context.truth_T_world2cam)
+
+
+def truth_ik_variant(obs: Observations, context: VariantContext) -> Reconstruction:
+    """The truth, put onto the body by inverse kinematics (no physics)."""
+    start = time.perf_counter()
+    kin = _truth_fit(obs, context, "truth-ik")
+    recon = kin.to_reconstruction(obs)
+    meta = dict(recon.meta, variant="truth-ik",
+                timings_s={"kinematics": time.perf_counter() - start})
+    return recon.replace(meta=meta)
+
+
+def dynamics_truth_variant(obs: Observations, context: VariantContext) -> Reconstruction:
+    """The trajectory optimisation (default preset) following the truth put onto the body."""
+    from physpose.dynamics.config import PRESETS  # noqa: PLC0415 (keeps the registry light)
+    from physpose.dynamics.optimize import optimize_dynamics  # noqa: PLC0415
+
+    start = time.perf_counter()
+    kin = _truth_fit(obs, context, "dynamics-truth")
+    kin_s = time.perf_counter() - start
+    body = build_body(kin.shape)
+    phys = optimize_dynamics(body, kin, obs, PRESETS["fast"], progress=False)
+    recon = kin.to_reconstruction(obs, body_mjcf=body.xml)
+    meta = dict(recon.meta, variant="dynamics-truth", dynamics=phys.meta(),
+                timings_s={"kinematics": kin_s, "dynamics": phys.timings["total"]})
+    return recon.replace(**phys.reconstruction_fields(), meta=meta)
+
+
+register_variant("truth-ik", truth_ik_variant)
+register_variant("dynamics-truth", dynamics_truth_variant)
