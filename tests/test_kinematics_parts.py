@@ -14,7 +14,7 @@ from physpose.fk import fk
 from physpose.joints import LANDMARK_INDEX
 from physpose.kinematics.config import KinematicConfig
 from physpose.kinematics.evidence import gather_evidence, padded_length, seed_frames
-from physpose.kinematics.ik import inverse_kinematics
+from physpose.kinematics.ik import angles_from_rotations, inverse_kinematics, segment_rotations
 from physpose.kinematics.losses import rotvec_matrix
 from physpose.kinematics.swaps import GROUPS, swap_paths, unswap
 from physpose.reconstruction import Reconstruction
@@ -59,6 +59,10 @@ def test_inverse_kinematics_of_arms_raised_overhead():
     assert np.linalg.norm(back - landmarks, axis=-1)[:, wrists].max() < 0.03
     # One form per stretch of frames: no 180-degree jumps in the recovered angles.
     assert np.abs(np.diff(angles2, axis=0)).max() < 0.5
+    # A single frame, and none at all, still work.
+    assert angles_from_rotations(segment_rotations(landmarks[:1], shape.bones())).shape == (
+        1, NUM_DOF)
+    assert angles_from_rotations(np.zeros((0, 17, 3, 3))).shape == (0, NUM_DOF)
 
 
 def test_rotation_vector_matrix():

@@ -15,7 +15,8 @@ from scipy.spatial.transform import Rotation
 from physpose.fk import angles_from_matrices
 from physpose.joints import LANDMARK_INDEX
 from physpose.kinematics.camera import rotation_to
-from physpose.skeleton import DOF_LIMITS, LANDMARK_SITES, PARENTS, SEGMENT_INDEX, landmark_offsets
+from physpose.skeleton import (DOF_LIMITS, LANDMARK_SITES, NUM_DOF, PARENTS, SEGMENT_INDEX,
+                               landmark_offsets)
 
 _FACE = ("nose", "left_eye_inner", "left_eye", "left_eye_outer", "right_eye_inner", "right_eye",
          "right_eye_outer", "left_ear", "right_ear", "mouth_left", "mouth_right")
@@ -189,7 +190,9 @@ def angles_from_rotations(rot: np.ndarray) -> np.ndarray:
     """
     parents = np.asarray(PARENTS[1:])
     local = np.einsum("tsji,tsjk->tsik", rot[:, parents], rot[:, 1:])
-    primary = angles_from_matrices(local).reshape(len(rot), -1, 3)
+    primary = angles_from_matrices(local).reshape(len(rot), len(PARENTS) - 1, 3)
+    if not len(rot):
+        return primary.reshape(0, NUM_DOF)
     second = _branches(primary)[..., None]
     angles = np.where(second, _second_form(primary), primary).reshape(len(rot), -1)
     return np.clip(angles, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])
