@@ -19,7 +19,7 @@ from scipy.spatial.transform import Rotation
 from physpose.benchmark.variants import VariantContext, register_variant
 from physpose.body import build_body
 from physpose.errors import PhysposeError
-from physpose.fk import fk, fk_mujoco
+from physpose.fk import fk, fk_qpos
 from physpose.kinematics.ik import inverse_kinematics
 from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
@@ -42,7 +42,7 @@ def truth_on_body(landmarks: np.ndarray, fps: float, camera_K: np.ndarray,
     root_pos = np.median(landmarks - np.asarray(relative), axis=1)
     quat_wxyz = Rotation.from_matrix(root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos = np.concatenate([root_pos, quat_wxyz, angles], axis=1)
-    joints, sites = fk_mujoco(build_body(shape), qpos)
+    joints, sites = fk_qpos(bones, qpos)
     return KinematicFit(fps=fps, shape=shape, qpos=qpos, joints=joints, landmarks=sites,
                         camera_K=np.asarray(camera_K, float),
                         T_world2cam=np.asarray(T_world2cam, float), variant="truth",
