@@ -150,8 +150,10 @@ def _second_form(angles: np.ndarray) -> np.ndarray:
     return _wrap(angles * [1.0, -1.0, 1.0] + np.pi)
 
 
-def _branches(primary: np.ndarray) -> np.ndarray:
+def _branches(forms: np.ndarray) -> np.ndarray:
     """Which form of each joint's rotation to use: (T, 16) bool, True for the second form.
+
+    forms: (T, 16, 2, 3), each joint's angles in the first and the second form.
 
     Ry(a) Rx(b) Rz(c) is also Ry(a + pi) Rx(pi - b) Rz(c + pi). The first form has |b| <= 90
     degrees; only the second is within the limits of a shoulder abducted past the horizontal
@@ -162,7 +164,6 @@ def _branches(primary: np.ndarray) -> np.ndarray:
     where the first stays out of them long enough to pay for the change (not for one frame
     whose twist the landmarks got wrong).
     """
-    forms = np.stack([primary, _second_form(primary)], axis=2)  # (T, J, 2, 3)
     lo, hi = DOF_LIMITS[:, 0].reshape(-1, 1, 3), DOF_LIMITS[:, 1].reshape(-1, 1, 3)
     outside = (np.maximum(lo - forms, 0.0) + np.maximum(forms - hi, 0.0)).sum(-1)  # (T, J, 2)
     outside[..., 1] = np.where(outside[..., 1] > _BRANCH_TOLERANCE, 1e6, outside[..., 1])
@@ -193,9 +194,9 @@ def angles_from_rotations(rot: np.ndarray) -> np.ndarray:
     primary = angles_from_matrices(local).reshape(len(rot), len(PARENTS) - 1, 3)
     if not len(rot):
         return primary.reshape(0, NUM_DOF)
-    second = _branches(primary)[..., None]
-    angles = np.where(second, _second_form(primary), primary).reshape(len(rot), -1)
-    return np.clip(angles, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])
+    forms = np.stack([primary, _second_form(primary)], axis=2)  # (T, 16, 2, 3)
+    angles = np.where(_branches(forms)[..., None], forms[:, :, 1], forms[:, :, 0])
+    return np.clip(angles.reshape(len(rot), NUM_DOF), DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])
 
 
 def inverse_kinematics(landmarks: np.ndarray, bones: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
