@@ -44,6 +44,7 @@ def _args(*argv: str):
     (["--candidates", "0"], "candidates must be >= 1"),
     (["--searches", "0"], "searches must be >= 1"),
     (["--balance-hz", "-1"], "balance gains"),
+    (["--refine", "-2"], "--refine -2 must be >= 0"),
     (["--weight", "com=-1"], "the weight must be a number >= 0"),
     (["--weight", "com=heavy"], "the weight must be a number >= 0"),
     (["--weight", "balance=1"], "names no objective term"),
@@ -118,6 +119,10 @@ def test_flags_make_the_pipeline_config():
                                ).dynamics.place_stretches
     assert pipeline_config(_args("v.mp4", "--out", "o", "--balance-hz", "0.5")
                            ).dynamics.balance.frequency == 0.5
+    assert pipeline_config(_args("v.mp4", "--out", "o", "--refine", "3")
+                           ).dynamics.refine.iterations == 3
+    assert not pipeline_config(_args("v.mp4", "--out", "o", "--refine", "0")
+                               ).dynamics.refine.enabled
     assert default.dynamics.weights == PRESETS["fast"].weights
     paper = pipeline_config(_args("v.mp4", "--out", "o", "--weight", "com=15",
                                   "--weight", "POSE = 0.5", "--weight", "swing=0")

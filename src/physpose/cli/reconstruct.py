@@ -61,6 +61,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="CMA-ES searches per window side by side (other seeds, the same "
                         "start); their average is kept, which cancels most of each search's "
                         "random walk: N times the search time (default: the preset's)")
+    p.add_argument("--refine", type=int, metavar="N",
+                   help="iLQR iterations refining each window's servo targets towards the "
+                        "estimate after the search (0: off; default: the preset's). About 1.4 s "
+                        "per iteration and window on 2 cores (docs/dynamics.md, iLQR refinement)")
     p.add_argument("--balance-hz", type=float, metavar="HZ",
                    help="closed-loop balance feedback (centre of mass through the standing "
                         "ankles) in every simulated sample, Hz, e.g. 0.5; 0 (the default) is "
@@ -191,6 +195,13 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         dynamics = dataclasses.replace(dynamics, place_stretches=args.place_stretches)
     if args.camera_travel is not None:
         dynamics = dataclasses.replace(dynamics, camera=args.camera_travel)
+    if args.refine is not None:
+        if args.refine < 0:
+            raise PhysposeError(f"--refine {args.refine} must be >= 0",
+                                remedy="pass a number of iLQR iterations, e.g. --refine 6, or "
+                                       "--refine 0 to switch the refinement off")
+        dynamics = dataclasses.replace(dynamics, refine=dataclasses.replace(
+            dynamics.refine, iterations=args.refine))
     if args.balance_hz is not None:
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))

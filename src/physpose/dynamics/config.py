@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 from physpose.dynamics.balance import BalanceGains
 from physpose.dynamics.controller import ControllerGains
+from physpose.dynamics.ilqr import RefineConfig
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.dynamics.travel import CAMERA_SETTINGS
 from physpose.errors import PhysposeError
@@ -71,6 +72,8 @@ class DynamicsConfig:
         detections' mean confidence of the foot's ankle, heel and toe (a step the detector
         barely sees is asked for less; measured in docs/dynamics.md, Swing feet weighted by
         the detector's confidence).
+    refine: iLQR refinement of each window's result after its search (ilqr.py; off while its
+        iterations are 0).
     nthread: rollout threads (does not change results).
     """
 
@@ -107,6 +110,7 @@ class DynamicsConfig:
     seed: int = 0
     camera: str = "still"
     swing_confidence: bool = True
+    refine: RefineConfig = field(default_factory=RefineConfig)
     nthread: int = 2
 
     def __post_init__(self) -> None:
@@ -151,6 +155,8 @@ class DynamicsConfig:
             out.pop("swing_confidence")  # likewise (added in stop 33; moot without the term)
         if self.searches == 1:
             out.pop("searches")  # likewise one search per window (averaging added in stop 25)
+        if not self.refine.enabled:
+            out.pop("refine")  # likewise no iLQR refinement (added in stop 36)
         return out
 
     def window_identity(self) -> dict:

@@ -46,6 +46,7 @@ from physpose.dynamics.stretches import shift_stretches, stretch_shifts, transla
 from physpose.dynamics.travel import camera_travel, camera_travels
 from physpose.dynamics.balance import balance_plan
 from physpose.dynamics.controller import track_reference
+from physpose.dynamics.ilqr import ImageTerm, refine_targets
 from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
                                        ranked_fitness, score, step_position, window_over)
 from physpose.errors import PhysposeError
@@ -353,7 +354,8 @@ def _record(win: Window, best: _Best, initial: dict, evaluations: int, seconds: 
             "start": ("inverse_dynamics", "tracking")[initial["start"]],
             "attempts": initial.get("attempts", 1), "handover_error": initial.get("handover_error"),
             "kept": initial.get("kept", "search 0"), "search_losses": initial.get("search_losses"),
-            "terms_final": best.terms, "weights": weights.as_dict(), "seconds": seconds}
+            "terms_final": best.terms, "weights": weights.as_dict(), "seconds": seconds,
+            **({"refine": initial["refine"]} if "refine" in initial else {})}
 
 
 _OUTPUT_KEYS = ("qpos", "joints", "landmarks", "com")
@@ -366,6 +368,44 @@ def _handover_error(setup: _Setup, best: _Best, win: Window, step_end: int) -> f
     return float(np.linalg.norm(com - setup.objective.com[min(frame, len(setup.objective.com) - 1)]))
 
 
+def _refine(setup: _Setup, problem: WindowProblem, best: _Best, initial: dict,
+            simulator: Simulator, cfg: DynamicsConfig, timing: dict) -> tuple[_Best, dict]:
+    """The search's result refined by iLQR (ilqr.py) towards the reference; kept when it is
+    valid and its objective is no worse than 1.5x the search's (the objective and the
+    refinement's tracking cost differ, so a small rise is allowed). The record gets
+    ``refine``: tracking cost before and after, objective before, seconds, kept."""
+    win = problem.window
+    ref = setup.reference
+    steps = np.minimum(np.arange(win.start_step, win.end_step + 1), ref.num_steps)
+    model, foot_geoms = setup.sim.model, setup.sim.body.foot_geom_ids
+    feet = (foot_geoms["l"], foot_geoms["r"])
+    objective, image = setup.objective, None
+    if cfg.refine.image and objective.camera_travel is None:
+        frames = win.frames
+        image = ImageTerm(steps=np.round(problem.positions).astype(int),
+                          keypoints=objective.keypoints2d[frames],
+                          metres_per_px=objective.metres_per_px[frames], K=objective.camera_K,
+                          T_world2cam=objective.T_world2cam,
+                          site_ids=setup.sim.body.landmark_site_ids)
+    refined = refine_targets(model, problem.state0, best.ctrl[:win.num_steps], ref.qpos[steps],
+                             ref.qvel[steps], cfg.refine, cfg.nthread, feet, image)
+    timing["refine"] = timing.get("refine", 0.0) + refined.seconds
+    traj = simulator.run(problem.state0, refined.ctrl[None])
+    scores, _ = score(problem.starting_from(refined.ctrl), traj, setup.objective, cfg.weights,
+                      cfg.max_root_distance, cfg.max_penetration)
+    loss = float(scores.total[0])
+    keep = bool(np.isfinite(loss)) and (not best.valid or loss <= 1.5 * best.loss)
+    record = {"cost_initial": refined.costs[0], "cost_final": refined.costs[-1],
+              "loss_searched": best.loss, "seconds": refined.seconds, "kept": keep}
+    initial = dict(initial, refine=record)
+    if not keep:
+        return best, initial
+    return _Best(x=best.x, loss=loss, fitness=loss, valid=True,
+                 terms={n: float(v[0]) for n, v in scores.terms.items()},
+                 states=traj.states[0].copy(), sensors=traj.sensors[0].copy(),
+                 ctrl=traj.ctrl[0].copy()), initial
+
+
 def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _Setup,
                          cfg: DynamicsConfig, timing: dict, w: int, step_end: int, label: str,
                          progress: bool) -> tuple[WindowProblem, _Best, dict, int]:
@@ -375,7 +415,11 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
     with the smallest handover error; returns its problem as searched (with its chosen start),
     best sample, initial record and the number of evaluations."""
     chosen, evaluations, first_start = None, 0, None
-    for attempt in range(cfg.retries + 1):
+    # Without search iterations an attempt is only its start (and its refinement): retrying
+    # makes sense only from the other start guess.
+    attempts = cfg.retries + 1 if cfg.iterations else min(cfg.retries + 1,
+                                                          1 + len(problem.alternatives))
+    for attempt in range(attempts):
         attempt_cfg = dataclasses.replace(cfg, sigma0=cfg.sigma0 * 1.5 ** attempt)
         # The first retry of a window with two start guesses goes on from the other one: the
         # better-scoring start can still be the one heading for a fall.
@@ -387,6 +431,8 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
         if attempt == 0:
             first_start = initial["start"]
         evaluations += count
+        if cfg.refine.enabled:
+            best, initial = _refine(setup, searched, best, initial, simulator, cfg, timing)
         error = _handover_error(setup, best, problem.window, step_end) if best.valid else np.inf
         if chosen is None or error < chosen[3]:
             chosen = (searched, best, initial, error)
@@ -497,9 +543,13 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
                              _kinematic_state(setup, wins[w].start_step, cfg.ground_snap), 0, None,
                              cfg) for w in group]
         label = f"dynamics windows {group[0] + 1}-{group[-1] + 1}/{len(wins)}"
-        _, bests, initials, counts = _search_averaged(
+        searched, bests, initials, counts = _search_averaged(
             problems, simulator, setup, cfg, timing, [_window_seed(cfg.seed, w) for w in group],
             label, progress)
+        if cfg.refine.enabled:
+            for i in range(len(group)):
+                bests[i], initials[i] = _refine(setup, searched[i], bests[i], initials[i],
+                                                simulator, cfg, timing)
         seconds = (time.perf_counter() - start) / len(group)
         for i, w in enumerate(group):
             win, best = wins[w], bests[i]

@@ -18,6 +18,7 @@ from physpose.benchmark.variants import VariantContext, register_variant
 from physpose.body import build_body
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.dynamics.config import ABLATIONS, PRESETS, DynamicsConfig, ablated
+from physpose.dynamics.ilqr import RefineConfig
 from physpose.dynamics.optimize import optimize_dynamics
 from physpose.kinematics.config import KinematicConfig
 from physpose.observations import Observations
@@ -58,3 +59,12 @@ register_variant("dynamics-full", _variant("SO+GT", FULL_OBJECTIVE, "dynamics-fu
 for _ablation in ABLATIONS:
     _name = f"dynamics-{_ablation}"
     register_variant(_name, _variant("SO+GT", ablated(FULL_OBJECTIVE, _ablation), _name))
+
+# iLQR refinement of every window's result (ilqr.py), after the search or instead of it.
+REFINED = dataclasses.replace(PRESETS["fast"], refine=RefineConfig(iterations=6))
+register_variant("dynamics-refined", _variant("SO+GT", REFINED, "dynamics-refined"))
+register_variant("dynamics-ilqr", _variant("SO+GT", dataclasses.replace(REFINED, iterations=0),
+                                           "dynamics-ilqr"))
+register_variant("dynamics-ilqr-image", _variant("SO+GT", dataclasses.replace(
+    REFINED, iterations=0, refine=RefineConfig(iterations=6, root_position=100.0, image=3e3)),
+    "dynamics-ilqr-image"))

@@ -1,0 +1,157 @@
+"""iLQR refinement of servo targets: it finds the motion a known set of targets made, from
+wrong targets, and its result replays exactly open loop."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from physpose.body import build_body, standing_qpos
+from physpose.dynamics.config import PRESETS, DynamicsConfig
+from physpose.dynamics.ilqr import RefineConfig, refine_targets
+from physpose.dynamics.rollout import Simulator, make_state, sim_model
+from physpose.dynamics.synthetic import motion_targets
+from physpose.errors import PhysposeError
+from physpose.shape import BodyShape
+from physpose.skeleton import DOF_NAMES, NQ, NV
+
+
+@pytest.fixture(scope="module")
+def stepping():
+    """(sim, state0, true targets (S, 48), true states (S+1, nstate)) of 0.6 s of the
+    simulated step motion (the left foot lifts from 0.45 s)."""
+    body = build_body(BodyShape.from_height(1.75))
+    sim = sim_model(body)
+    targets = motion_targets(body, "step", 0.6)
+    state0 = make_state(sim, standing_qpos(body), np.zeros(NV))
+    with Simulator(sim, nthread=1) as simulator:
+        states = simulator.run(state0, targets[None]).states[0]
+    return sim, state0, targets, states
+
+
+def _hinge_rms(states: np.ndarray, truth: np.ndarray) -> float:
+    return float(np.sqrt(np.mean((states[:, 8:1 + NQ] - truth[:, 8:1 + NQ]) ** 2)))
+
+
+def test_refinement_finds_the_motion_from_wrong_targets(stepping):
+    sim, state0, targets, truth = stepping
+    wrong = targets.copy()
+    for name in ("l_hip_y", "r_hip_y", "l_knee_y", "spine_y"):
+        wrong[:, DOF_NAMES.index(name)] += 0.08  # rad: a crouched, leaning motion instead
+    with Simulator(sim, nthread=1) as simulator:
+        start = simulator.run(state0, wrong[None]).states[0]
+    qpos, qvel = truth[:, 1:1 + NQ], truth[:, 1 + NQ:1 + NQ + NV]
+    refined = refine_targets(sim.model, state0, wrong, qpos, qvel, RefineConfig(iterations=4))
+    assert refined.costs[-1] < 0.2 * refined.costs[0]
+    assert all(b <= a for a, b in zip(refined.costs, refined.costs[1:]))  # never worse
+    assert _hinge_rms(refined.states, truth) < 0.3 * _hinge_rms(start, truth)
+    root_error = np.linalg.norm(refined.states[:, 1:4] - truth[:, 1:4], axis=-1)
+    assert root_error.max() < 0.01  # m
+
+
+def test_refined_targets_replay_the_refined_motion_exactly(stepping):
+    sim, state0, targets, truth = stepping
+    qpos, qvel = truth[:, 1:1 + NQ], truth[:, 1 + NQ:1 + NQ + NV]
+    refined = refine_targets(sim.model, state0, targets + 0.03, qpos, qvel,
+                             RefineConfig(iterations=2))
+    with Simulator(sim, nthread=1) as simulator:
+        replay = simulator.run(state0, refined.ctrl[None]).states[0]
+    np.testing.assert_array_equal(replay, refined.states)
+
+
+def test_zero_iterations_return_the_start(stepping):
+    sim, state0, targets, truth = stepping
+    refined = refine_targets(sim.model, state0, targets, truth[:, 1:1 + NQ],
+                             truth[:, 1 + NQ:1 + NQ + NV], RefineConfig(iterations=0))
+    np.testing.assert_array_equal(refined.ctrl, targets)
+    assert refined.costs == [pytest.approx(0.0, abs=1e-9)]
+
+
+@pytest.mark.parametrize("changes", [{"iterations": -1}, {"derivative_stride": 0},
+                                     {"hinge": -1.0}, {"control": float("nan")}])
+def test_bad_refine_settings_are_refused(changes):
+    with pytest.raises(PhysposeError):
+        RefineConfig(**changes)
+
+
+def test_refinement_off_leaves_checkpoint_keys_as_they_were():
+    assert "refine" not in DynamicsConfig().identity()
+    assert "refine" not in PRESETS["paper"].window_identity()
+    on = DynamicsConfig(refine=RefineConfig(iterations=3))
+    assert on.identity()["refine"]["iterations"] == 3
+
+
+def test_threads_do_not_change_the_result(stepping):
+    sim, state0, targets, truth = stepping
+    args = (sim.model, state0, targets + 0.03, truth[:, 1:1 + NQ], truth[:, 1 + NQ:1 + NQ + NV],
+            RefineConfig(iterations=1))
+    one, two = refine_targets(*args, nthread=1), refine_targets(*args, nthread=2)
+    np.testing.assert_array_equal(one.ctrl, two.ctrl)
+
+
+def test_a_standing_foot_is_kept_from_sliding(stepping):
+    """Asked to follow a reference that drags the standing right foot sideways, the foot
+    slide term keeps that foot where it stands (at a cost in tracking)."""
+    sim, state0, targets, truth = stepping
+    qpos, qvel = truth[:, 1:1 + NQ].copy(), truth[:, 1 + NQ:1 + NQ + NV].copy()
+    t = np.arange(len(qpos)) * sim.dt
+    qpos[:, 1] += 0.3 * t  # the whole body drifts sideways at 0.3 m/s: standing feet slide
+    qvel[:, 1] += 0.3
+    foot = sim.body.foot_geom_ids["r"]
+    right = int(sim.model.geom_bodyid[foot])
+
+    def right_foot_travel(cfg: RefineConfig) -> float:
+        refined = refine_targets(sim.model, state0, targets, qpos, qvel, cfg, 1, (foot,))
+        import mujoco  # noqa: PLC0415
+        d = mujoco.MjData(sim.model)
+        xy = []
+        for state in refined.states[[0, -1]]:
+            d.qpos[:] = state[1:1 + NQ]
+            mujoco.mj_kinematics(sim.model, d)
+            xy.append(d.xpos[right, :2].copy())
+        return float(np.linalg.norm(xy[1] - xy[0]))
+
+    free = right_foot_travel(RefineConfig(iterations=3, foot_slide=0.0))
+    held = right_foot_travel(RefineConfig(iterations=3, foot_slide=1e4))
+    assert held < 0.5 * free
+
+
+def test_the_image_term_pulls_the_body_onto_the_detections(stepping):
+    """The reference is the true motion moved 10 cm sideways; the detections are the true
+    motion's. With the image term the refined body lands nearer the detections."""
+    from physpose.dynamics.ilqr import ImageTerm  # noqa: PLC0415
+    from physpose.dynamics.objective import project  # noqa: PLC0415
+    from physpose.dynamics.synthetic import virtual_camera  # noqa: PLC0415
+    import mujoco  # noqa: PLC0415
+
+    sim, state0, targets, truth = stepping
+    K, T = virtual_camera()
+    sites = sim.body.landmark_site_ids
+    d = mujoco.MjData(sim.model)
+
+    def landmarks(states: np.ndarray) -> np.ndarray:
+        out = []
+        for state in states:
+            d.qpos[:] = state[1:1 + NQ]
+            mujoco.mj_kinematics(sim.model, d)
+            out.append(d.site_xpos[sites].copy())
+        return np.array(out)
+
+    steps = np.arange(8, len(truth), 8)
+    uv = project(landmarks(truth[steps]), K, T)
+    keypoints = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
+    image = ImageTerm(steps=steps, keypoints=keypoints, metres_per_px=np.full(len(steps), 0.004),
+                      K=K, T_world2cam=T, site_ids=sites)
+    qpos, qvel = truth[:, 1:1 + NQ].copy(), truth[:, 1 + NQ:1 + NQ + NV]
+    qpos[:, 1] += 0.10  # the reference stands 10 cm to the side of where the person is
+
+    def image_error(cfg: RefineConfig) -> float:
+        refined = refine_targets(sim.model, state0, targets, qpos, qvel, cfg, image=image)
+        return float(np.linalg.norm(project(landmarks(refined.states[steps]), K, T) - uv,
+                                    axis=-1).mean())
+
+    base = RefineConfig(iterations=3, root_position=100.0, foot_slide=0.0)
+    without = image_error(base)
+    with_image = image_error(RefineConfig(iterations=3, root_position=100.0, foot_slide=0.0,
+                                          image=3e3))
+    assert with_image < 0.7 * without
