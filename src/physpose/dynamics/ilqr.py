@@ -128,7 +128,8 @@ class ImageTerm:
 
 
 class _Problem:
-    """One window's tracking problem on a model (its own MjData per thread)."""
+    """One window's tracking problem on a model: ``data`` steps its rollouts, ``posed`` poses
+    states for the foot and image terms (the derivatives' threads make their own)."""
 
     def __init__(self, model: mujoco.MjModel, state0: np.ndarray, ref_qpos: np.ndarray,
                  ref_qvel: np.ndarray, u_start: np.ndarray, cfg: RefineConfig,
@@ -139,6 +140,7 @@ class _Problem:
         self.ref_qpos, self.ref_qvel, self.u_start = ref_qpos, ref_qvel, u_start
         self.nv, self.nq = model.nv, model.nq
         self.data = mujoco.MjData(model)
+        self.posed = mujoco.MjData(model)
         wq = np.full(self.nv, cfg.hinge)
         wq[:3], wq[3:6] = cfg.root_position, cfg.root_orientation
         wv = np.full(self.nv, cfg.hinge_velocity)
@@ -169,7 +171,7 @@ class _Problem:
         edge keeps that point still)."""
         if not self.cfg.foot_slide or not self.feet:
             return {}
-        m, d = self.model, mujoco.MjData(self.model)
+        m, d = self.model, self.posed
         jac = np.zeros((3, self.nv))
         signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], float)
         out = {}
@@ -198,7 +200,7 @@ class _Problem:
         img = self.image
         if img is None:
             return 0.0, {}
-        m, d = self.model, mujoco.MjData(self.model)
+        m, d = self.model, self.posed
         R, tr = img.T_world2cam[:3, :3], img.T_world2cam[:3, 3]
         fx, fy = img.K[0, 0], img.K[1, 1]
         delta, w = self.cfg.image_huber, self.cfg.image
@@ -352,13 +354,13 @@ def refine_targets(model: mujoco.MjModel, state0: np.ndarray, ctrl: np.ndarray,
     try:
         problem = _Problem(model, state0, ref_qpos, ref_qvel, np.asarray(ctrl, dtype=float),
                            cfg, feet, image)
-        return _refine(problem, cfg, pool, nthread, start)
+        return _iterate(problem, cfg, pool, nthread, start)
     finally:
         if pool is not None:
             pool.shutdown()
 
 
-def _refine(problem: _Problem, cfg: RefineConfig, pool: ThreadPoolExecutor | None,
+def _iterate(problem: _Problem, cfg: RefineConfig, pool: ThreadPoolExecutor | None,
             nthread: int, start: float) -> Refined:
     states, applied = problem.rollout(problem.u_start)
     cost = problem.cost(states, applied)
