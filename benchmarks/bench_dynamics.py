@@ -8,10 +8,10 @@ preset (2000 iterations x 100 samples per 1 s window) is timed on one 1 s window
 iterations and extrapolated to its 2000 (reported as such). Rollout throughput (one-second
 rollouts per second, two threads, open loop and under balance feedback) is printed for
 reference, and so is the tracking controller's speed (the second start guess of every
-window; seconds of wall time per simulated second). With ``--refine N`` (default 6) the fast
-preset is run again with N iLQR iterations refining every window (dynamics/ilqr.py), after
-its search and instead of it (no CMA-ES iterations). Timings on a shared 2-core machine are
-noisy: compare ratios.
+window; seconds of wall time per simulated second). The fast preset refines every window by
+iLQR after its search (dynamics/ilqr.py); it is also timed with the search alone and with the
+iLQR alone (no CMA-ES iterations). ``--refine N`` sets the iLQR iterations (0: the search
+alone only). Timings on a shared 2-core machine are noisy: compare ratios.
 """
 
 from __future__ import annotations
@@ -82,8 +82,9 @@ def main() -> None:
     ap.add_argument("--motion", default="step", help="simulated motion (stand, shift, step)")
     ap.add_argument("--paper-iterations", type=int, default=3,
                     help="iterations of the paper preset to time (extrapolated to 2000)")
-    ap.add_argument("--refine", type=int, default=6,
-                    help="iLQR iterations of the refined runs (0: skip them)")
+    ap.add_argument("--refine", type=int,
+                    help="iLQR iterations per window of the fast preset (default: the "
+                         "preset's; 0 times the search alone)")
     ap.add_argument("--json", help="also write the figures to this file")
     args = ap.parse_args()
 
@@ -97,27 +98,24 @@ def main() -> None:
            "tracking_s_per_simulated_s": tracking_cost(body, fit)}
 
     fast = PRESETS["fast"]
-    start = time.perf_counter()
-    res = optimize_dynamics(body, fit, obs, fast, checkpoints=False, progress=False)
-    wall = time.perf_counter() - start
-    err = np.linalg.norm(res.joints - fit.joints, axis=-1).mean()
-    out["fast"] = {"wall_s": wall, "wall_s_per_video_s": wall / video_s,
-                   "windows": len(res.windows),
-                   "rollouts": int(sum(w["evaluations"] for w in res.windows)),
-                   "timings_s": res.timings, "mpjpe_to_input_mm": 1000 * err}
-
-    if args.refine:
-        refined = dataclasses.replace(fast, refine=dataclasses.replace(
-            fast.refine, iterations=args.refine))
-        for name, cfg in (("fast_refined", refined),
-                          ("ilqr_only", dataclasses.replace(refined, iterations=0))):
-            start = time.perf_counter()
-            res = optimize_dynamics(body, fit, obs, cfg, checkpoints=False, progress=False)
-            wall = time.perf_counter() - start
-            err = np.linalg.norm(res.joints - fit.joints, axis=-1).mean()
-            out[name] = {"wall_s": wall, "wall_s_per_video_s": wall / video_s,
-                         "refine_s": res.timings.get("refine", 0.0),
-                         "mpjpe_to_input_mm": 1000 * err}
+    if args.refine is not None:
+        fast = dataclasses.replace(fast, refine=dataclasses.replace(fast.refine,
+                                                                    iterations=args.refine))
+    runs = {"fast": fast}
+    if fast.refine.enabled:  # the search alone, and the iLQR alone (no CMA-ES iterations)
+        runs["search_only"] = dataclasses.replace(fast, refine=dataclasses.replace(
+            fast.refine, iterations=0))
+        runs["ilqr_only"] = dataclasses.replace(fast, iterations=0)
+    for name, cfg in runs.items():
+        start = time.perf_counter()
+        res = optimize_dynamics(body, fit, obs, cfg, checkpoints=False, progress=False)
+        wall = time.perf_counter() - start
+        err = np.linalg.norm(res.joints - fit.joints, axis=-1).mean()
+        out[name] = {"wall_s": wall, "wall_s_per_video_s": wall / video_s,
+                     "windows": len(res.windows),
+                     "rollouts": int(sum(w["evaluations"] for w in res.windows)),
+                     "refine_s": res.timings.get("refine", 0.0),
+                     "timings_s": res.timings, "mpjpe_to_input_mm": 1000 * err}
 
     paper = dataclasses.replace(PRESETS["paper"], iterations=args.paper_iterations)
     window = fit.num_frames if video_s <= 1.0 else int(round(fit.fps)) + 1
@@ -140,16 +138,15 @@ def main() -> None:
     print(f"rollouts: {out['rollouts_per_s']:.0f} one-second rollouts/s (2 threads); "
           f"{out['rollouts_per_s_with_balance']:.0f} with balance feedback (20 ms chunks)")
     print(f"tracking controller: {out['tracking_s_per_simulated_s']:.2f} s per simulated second")
-    f = out["fast"]
-    print(f"fast preset: {f['wall_s']:.1f} s for {video_s:.2f} s of video = "
-          f"{f['wall_s_per_video_s']:.1f} s per second ({f['windows']} windows, "
-          f"{f['rollouts']} rollouts); MPJPE to the input {f['mpjpe_to_input_mm']:.1f} mm")
-    for name in ("fast_refined", "ilqr_only"):
-        if name in out:
-            r = out[name]
-            print(f"{name} ({args.refine} iLQR iterations per window): {r['wall_s']:.1f} s = "
-                  f"{r['wall_s_per_video_s']:.1f} s per second of video (iLQR "
-                  f"{r['refine_s']:.1f} s); MPJPE to the input {r['mpjpe_to_input_mm']:.1f} mm")
+    labels = {"fast": f"fast preset ({fast.refine.iterations} iLQR iterations per window)",
+              "search_only": "the search alone (no iLQR)",
+              "ilqr_only": f"iLQR alone ({fast.refine.iterations} iterations, no search)"}
+    for name in runs:
+        r = out[name]
+        print(f"{labels[name]}: {r['wall_s']:.1f} s for {video_s:.2f} s of video = "
+              f"{r['wall_s_per_video_s']:.1f} s per second ({r['windows']} windows, "
+              f"{r['rollouts']} rollouts, iLQR {r['refine_s']:.1f} s); MPJPE to the input "
+              f"{r['mpjpe_to_input_mm']:.1f} mm")
     p = out["paper_one_window"]
     print(f"paper preset, one 1 s window: {p['seconds_per_iteration']:.2f} s per iteration x "
           f"2000 = {p['extrapolated_2000_iterations_s'] / 60:.0f} min (extrapolated from "

@@ -8,7 +8,7 @@ import pytest
 
 from physpose.dynamics import ABLATIONS, PRESETS, DynamicsConfig, ablated
 from physpose.dynamics.objective import ObjectiveWeights
-from physpose.dynamics.variants import FULL_OBJECTIVE
+from physpose.dynamics.variants import FULL_OBJECTIVE, SEARCH_ONLY
 from physpose.errors import PhysposeError
 
 
@@ -21,7 +21,12 @@ def test_presets_and_ablations():
     assert ObjectiveWeights().swing == 0.0
     assert PRESETS["fast"].weights.com == 0.0 and PRESETS["fast"].weights.pose == 0.5
     assert PRESETS["fast"].weights.swing > 0
-    assert FULL_OBJECTIVE == dataclasses.replace(PRESETS["fast"], weights=ObjectiveWeights())
+    # The fast preset refines each window by iLQR after its search; the paper's has no
+    # refinement, nor do the ablations (which remove terms of the search's objective).
+    assert PRESETS["fast"].refine.enabled and not PRESETS["paper"].refine.enabled
+    assert SEARCH_ONLY == dataclasses.replace(PRESETS["fast"], refine=SEARCH_ONLY.refine)
+    assert not SEARCH_ONLY.refine.enabled
+    assert FULL_OBJECTIVE == dataclasses.replace(SEARCH_ONLY, weights=ObjectiveWeights())
     for name, terms in ABLATIONS.items():
         w = ablated(FULL_OBJECTIVE, name).weights
         for term in terms:

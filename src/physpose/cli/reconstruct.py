@@ -63,8 +63,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "random walk: N times the search time (default: the preset's)")
     p.add_argument("--refine", type=int, metavar="N",
                    help="iLQR iterations refining each window's servo targets towards the "
-                        "estimate after the search (0: off; default: the preset's). About 1.4 s "
-                        "per iteration and window on 2 cores (docs/dynamics.md, iLQR refinement)")
+                        "estimate after the search (0: off; default: the preset's, 6 in fast, "
+                        "0 in paper). About 1.4 s per iteration and window on 2 cores "
+                        "(docs/dynamics.md, iLQR refinement)")
     p.add_argument("--balance-hz", type=float, metavar="HZ",
                    help="closed-loop balance feedback (centre of mass through the standing "
                         "ankles) in every simulated sample, Hz, e.g. 0.5; 0 (the default) is "

@@ -51,20 +51,23 @@ def _variant(kinematic_variant: str, config: DynamicsConfig, name: str):
     return fn
 
 
-FULL_OBJECTIVE = dataclasses.replace(PRESETS["fast"], weights=ObjectiveWeights())
+# The search alone (the fast preset before stop 37, without the iLQR refinement).
+SEARCH_ONLY = dataclasses.replace(PRESETS["fast"], refine=RefineConfig(iterations=0))
+# The ablations (the paper's Table 2) remove terms of the search's objective, which the iLQR
+# refinement does not use, so they run on the search alone.
+FULL_OBJECTIVE = dataclasses.replace(SEARCH_ONLY, weights=ObjectiveWeights())
 
 register_variant("dynamics", _variant("SO+GT", PRESETS["fast"], "dynamics"))
 register_variant("dynamics-so", _variant("SO", PRESETS["fast"], "dynamics-so"))
+register_variant("dynamics-search", _variant("SO+GT", SEARCH_ONLY, "dynamics-search"))
 register_variant("dynamics-full", _variant("SO+GT", FULL_OBJECTIVE, "dynamics-full"))
 for _ablation in ABLATIONS:
     _name = f"dynamics-{_ablation}"
     register_variant(_name, _variant("SO+GT", ablated(FULL_OBJECTIVE, _ablation), _name))
 
-# iLQR refinement of every window's result (ilqr.py), after the search or instead of it.
-REFINED = dataclasses.replace(PRESETS["fast"], refine=RefineConfig(iterations=6))
-register_variant("dynamics-refined", _variant("SO+GT", REFINED, "dynamics-refined"))
-register_variant("dynamics-ilqr", _variant("SO+GT", dataclasses.replace(REFINED, iterations=0),
-                                           "dynamics-ilqr"))
+# iLQR instead of the search (ilqr.py).
+_ILQR = dataclasses.replace(PRESETS["fast"], iterations=0, refine=RefineConfig(iterations=6))
+register_variant("dynamics-ilqr", _variant("SO+GT", _ILQR, "dynamics-ilqr"))
 register_variant("dynamics-ilqr-image", _variant("SO+GT", dataclasses.replace(
-    REFINED, iterations=0, refine=RefineConfig(iterations=6, root_position=100.0, image=3e3)),
+    _ILQR, refine=RefineConfig(iterations=6, root_position=100.0, image=3e3)),
     "dynamics-ilqr-image"))
