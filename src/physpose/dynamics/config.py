@@ -185,8 +185,10 @@ PRESETS: dict[str, DynamicsConfig] = {
     # unchanged within its noise (docs/dynamics.md, Swing feet weighted by the detector's
     # confidence).
     # Six iLQR iterations after each window's search (refine, ilqr.py; stop 37): on the 15
-    # motion-capture clips it restarted less and lowered MPJPE-G, velocity error, skate and
-    # jitter; 1.8x the time (docs/dynamics.md, iLQR refinement).
+    # motion-capture clips 2.0 restarts per clip instead of 3.1, the other figures within
+    # their noise; on the everyday motions nearer the truth (MPJPE-G -10 mm, velocity error
+    # and skate lower), on the athletic ones a little further; 1.44x the dynamics time
+    # (docs/dynamics.md, iLQR refinement).
     "fast": DynamicsConfig(tracking_start=True, weights=ObjectiveWeights(com=0.0, swing=12.0),
                            refine=RefineConfig(iterations=6)),
     # The paper's budget: 2000 iterations x 100 samples per 1 s window, full covariance; its
