@@ -65,8 +65,8 @@ for _ablation in ABLATIONS:
     _name = f"dynamics-{_ablation}"
     register_variant(_name, _variant("SO+GT", ablated(FULL_OBJECTIVE, _ablation), _name))
 
-# iLQR instead of the search (ilqr.py).
-_ILQR = dataclasses.replace(PRESETS["fast"], iterations=0, refine=RefineConfig(iterations=6))
+# iLQR instead of the search (ilqr.py): the fast preset's refinement without CMA-ES iterations.
+_ILQR = dataclasses.replace(PRESETS["fast"], iterations=0)
 register_variant("dynamics-ilqr", _variant("SO+GT", _ILQR, "dynamics-ilqr"))
 register_variant("dynamics-ilqr-image", _variant("SO+GT", dataclasses.replace(
     _ILQR, refine=RefineConfig(iterations=6, root_position=100.0, image=3e3)),
