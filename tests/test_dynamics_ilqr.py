@@ -68,7 +68,8 @@ def test_zero_iterations_return_the_start(stepping):
 
 
 @pytest.mark.parametrize("changes", [{"iterations": -1}, {"derivative_stride": 0},
-                                     {"hinge": -1.0}, {"control": float("nan")}])
+                                     {"hinge": -1.0}, {"control": float("nan")},
+                                     {"keep_ratio": -1.0}])
 def test_bad_refine_settings_are_refused(changes):
     with pytest.raises(PhysposeError):
         RefineConfig(**changes)
@@ -79,6 +80,10 @@ def test_refinement_off_leaves_checkpoint_keys_as_they_were():
     assert "refine" not in PRESETS["paper"].window_identity()
     on = DynamicsConfig(refine=RefineConfig(iterations=3))
     assert on.identity()["refine"]["iterations"] == 3
+    # The keep test's default ratio (1.5, fixed before it was a setting) keeps the keys too.
+    assert "keep_ratio" not in on.identity()["refine"]
+    stricter = DynamicsConfig(refine=RefineConfig(iterations=3, keep_ratio=1.1))
+    assert stricter.identity()["refine"]["keep_ratio"] == 1.1
 
 
 def test_threads_do_not_change_the_result(stepping):

@@ -279,6 +279,12 @@ def test_refinement_is_recorded_and_brings_the_body_nearer_the_estimate(clip):
         return float(np.linalg.norm(res.joints - fit.joints, axis=-1).mean())
 
     assert error(refined) < error(plain)
+    # A window keeps the refined targets only when their objective is at most keep_ratio
+    # times the search's: at 0 none does, and the result is the search's.
+    refused = run(clip, dataclasses.replace(TINY, iterations=0, refine=RefineConfig(
+        iterations=2, keep_ratio=0.0)), checkpoints=False)
+    assert not any(w["refine"]["kept"] for w in refused.windows)
+    np.testing.assert_array_equal(refused.joints, plain.joints)
     both = run(clip, dataclasses.replace(TINY, independent=True,
                                          refine=RefineConfig(iterations=1)), checkpoints=False)
     assert all("refine" in w for w in both.windows)

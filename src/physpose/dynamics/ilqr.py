@@ -70,6 +70,8 @@ class RefineConfig:
     re-projection error, in metres at the person's depth, confidence-weighted, Huber beyond
     image_huber m);
     terminal: the last state's weight multiplier.
+    keep_ratio: a window keeps the refined targets when their objective (the search's, not
+    this tracking cost) is at most keep_ratio times the search's result.
     derivative_stride: steps between linearisations (each is held until the next).
     regularisation: initial damping of the control Hessian.
     """
@@ -85,6 +87,7 @@ class RefineConfig:
     image: float = 0.0
     image_huber: float = 0.03
     terminal: float = 5.0
+    keep_ratio: float = 1.5
     derivative_stride: int = 2
     regularisation: float = 30.0
 

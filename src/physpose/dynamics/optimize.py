@@ -371,7 +371,7 @@ def _handover_error(setup: _Setup, best: _Best, win: Window, step_end: int) -> f
 def _refine(setup: _Setup, problem: WindowProblem, best: _Best, initial: dict,
             simulator: Simulator, cfg: DynamicsConfig, timing: dict) -> tuple[_Best, dict]:
     """The search's result refined by iLQR (ilqr.py) towards the reference; kept when it is
-    valid and its objective is no worse than 1.5x the search's (the objective and the
+    valid and its objective is at most ``keep_ratio`` times the search's (the objective and the
     refinement's tracking cost differ, so a small rise is allowed). The record gets
     ``refine``: tracking cost before and after, objective before, seconds, kept."""
     win = problem.window
@@ -394,7 +394,7 @@ def _refine(setup: _Setup, problem: WindowProblem, best: _Best, initial: dict,
     scores, _ = score(problem.starting_from(refined.ctrl), traj, setup.objective, cfg.weights,
                       cfg.max_root_distance, cfg.max_penetration)
     loss = float(scores.total[0])
-    keep = bool(np.isfinite(loss)) and (not best.valid or loss <= 1.5 * best.loss)
+    keep = bool(np.isfinite(loss)) and (not best.valid or loss <= cfg.refine.keep_ratio * best.loss)
     record = {"cost_initial": refined.costs[0], "cost_final": refined.costs[-1],
               "loss_searched": best.loss, "seconds": refined.seconds, "kept": keep}
     initial = dict(initial, refine=record)
