@@ -17,7 +17,7 @@ from physpose.shape import BodyShape
 @pytest.mark.parametrize("kind", MOTIONS)
 def test_simulated_motion_is_recovered(kind):
     body = build_body(BodyShape.from_height(1.75))
-    fit, obs, _ = simulated_clip(body, kind, seconds=2.0)
+    fit, obs, _ = simulated_clip(body, kind, seconds=1.6)
     res = optimize_dynamics(body, fit, obs, PRESETS["fast"], checkpoints=False, progress=False)
     global_err = np.linalg.norm(res.joints - fit.joints, axis=-1).mean()
     assert mpjpe(res.joints, fit.joints) < 20.0  # mm, root-aligned per frame
