@@ -394,7 +394,8 @@ def _refine(setup: _Setup, problem: WindowProblem, best: _Best, initial: dict,
     scores, _ = score(problem.starting_from(refined.ctrl), traj, setup.objective, cfg.weights,
                       cfg.max_root_distance, cfg.max_penetration)
     loss = float(scores.total[0])
-    keep = bool(np.isfinite(loss)) and (not best.valid or loss <= cfg.refine.keep_ratio * best.loss)
+    keep = bool(np.isfinite(loss)) and (not best.valid
+                                        or loss <= cfg.refine.keep_ratio * best.loss)
     record = {"cost_initial": refined.costs[0], "cost_final": refined.costs[-1],
               "loss_searched": best.loss, "seconds": refined.seconds, "kept": keep}
     initial = dict(initial, refine=record)
