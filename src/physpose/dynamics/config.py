@@ -157,8 +157,8 @@ class DynamicsConfig:
             out.pop("searches")  # likewise one search per window (averaging added in stop 25)
         if not self.refine.enabled:
             out.pop("refine")  # likewise no iLQR refinement (added in stop 36)
-        elif self.refine.keep_ratio == 1.5:
-            out["refine"].pop("keep_ratio")  # likewise its keep test (configurable in stop 38)
+        elif self.refine.keep_ratio == RefineConfig.keep_ratio:
+            out["refine"].pop("keep_ratio")  # likewise the default keep test (stop 38)
         return out
 
     def window_identity(self) -> dict:
