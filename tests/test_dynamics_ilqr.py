@@ -80,8 +80,10 @@ def test_refinement_off_leaves_checkpoint_keys_as_they_were():
     assert "refine" not in PRESETS["paper"].window_identity()
     on = DynamicsConfig(refine=RefineConfig(iterations=3))
     assert on.identity()["refine"]["iterations"] == 3
-    # The keep test's default ratio (1.5, fixed before it was a setting) keeps the keys too.
-    assert "keep_ratio" not in on.identity()["refine"]
+    # The ratio fixed before it was a setting (1.5) keeps the keys too; any other ratio is
+    # keyed, so a changed default can never reuse those earlier checkpoints.
+    old = DynamicsConfig(refine=RefineConfig(iterations=3, keep_ratio=1.5))
+    assert "keep_ratio" not in old.identity()["refine"]
     stricter = DynamicsConfig(refine=RefineConfig(iterations=3, keep_ratio=1.1))
     assert stricter.identity()["refine"]["keep_ratio"] == 1.1
 

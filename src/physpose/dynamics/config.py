@@ -19,6 +19,9 @@ from physpose.errors import PhysposeError
 
 # Hinges whose targets CMA-ES varies (optimize.searched_dofs).
 SEARCH_SETS = ("all", "legs_trunk", "legs")
+# The refinement's keep ratio while it was fixed (stops 36-37): checkpoints made then have no
+# keep_ratio in their key, so only this value may leave it out, whatever the default becomes.
+UNKEYED_KEEP_RATIO = 1.5
 
 
 @dataclass(frozen=True)
@@ -157,8 +160,8 @@ class DynamicsConfig:
             out.pop("searches")  # likewise one search per window (averaging added in stop 25)
         if not self.refine.enabled:
             out.pop("refine")  # likewise no iLQR refinement (added in stop 36)
-        elif self.refine.keep_ratio == RefineConfig.keep_ratio:
-            out["refine"].pop("keep_ratio")  # likewise the default keep test (stop 38)
+        elif self.refine.keep_ratio == UNKEYED_KEEP_RATIO:
+            out["refine"].pop("keep_ratio")  # likewise the keep test before it was a setting
         return out
 
     def window_identity(self) -> dict:
