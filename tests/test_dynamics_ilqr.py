@@ -123,9 +123,11 @@ def test_a_standing_foot_is_kept_from_sliding(stepping):
     assert held < 0.5 * free
 
 
-def test_the_image_term_pulls_the_body_onto_the_detections(stepping):
+@pytest.mark.parametrize("travelling", [False, True])
+def test_the_image_term_pulls_the_body_onto_the_detections(stepping, travelling):
     """The reference is the true motion moved 10 cm sideways; the detections are the true
-    motion's. With the image term the refined body lands nearer the detections."""
+    motion's (seen by a camera that travels 0.3 m/s forward with the person when
+    ``travelling``). With the image term the refined body lands nearer the detections."""
     from physpose.dynamics.ilqr import ImageTerm  # noqa: PLC0415
     from physpose.dynamics.objective import project  # noqa: PLC0415
     from physpose.dynamics.synthetic import virtual_camera  # noqa: PLC0415
@@ -145,17 +147,21 @@ def test_the_image_term_pulls_the_body_onto_the_detections(stepping):
         return np.array(out)
 
     steps = np.arange(8, len(truth), 8)
-    uv = project(landmarks(truth[steps]), K, T)
+    travel = np.zeros((len(steps), 3))
+    if travelling:
+        travel[:, 0] = 0.3 * steps * sim.model.opt.timestep
+    uv = project(landmarks(truth[steps]) - travel[:, None], K, T)
     keypoints = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
     image = ImageTerm(steps=steps, keypoints=keypoints, metres_per_px=np.full(len(steps), 0.004),
-                      K=K, T_world2cam=T, site_ids=sites)
+                      K=K, T_world2cam=T, site_ids=sites,
+                      camera_travel=travel if travelling else None)
     qpos, qvel = truth[:, 1:1 + NQ].copy(), truth[:, 1 + NQ:1 + NQ + NV]
     qpos[:, 1] += 0.10  # the reference stands 10 cm to the side of where the person is
 
     def image_error(cfg: RefineConfig) -> float:
         refined = refine_targets(sim.model, state0, targets, qpos, qvel, cfg, image=image)
-        return float(np.linalg.norm(project(landmarks(refined.states[steps]), K, T) - uv,
-                                    axis=-1).mean())
+        seen = landmarks(refined.states[steps]) - travel[:, None]
+        return float(np.linalg.norm(project(seen, K, T) - uv, axis=-1).mean())
 
     base = RefineConfig(iterations=3, root_position=100.0, foot_slide=0.0)
     without = image_error(base)

@@ -121,7 +121,9 @@ class Refined:
 class ImageTerm:
     """Detections a window's states are re-projected onto: steps (F,) the state index of
     each frame in the window, keypoints (F, 33, 3) px + confidence, metres_per_px (F,),
-    camera K (3, 3) and T_world2cam (4, 4), site_ids (33,) the landmark sites."""
+    camera K (3, 3) and T_world2cam (4, 4), site_ids (33,) the landmark sites;
+    camera_travel (F, 3) m or None: how far a travelling camera had moved by each frame
+    (travel.py), the body seen moved back by it."""
 
     steps: np.ndarray
     keypoints: np.ndarray
@@ -129,6 +131,7 @@ class ImageTerm:
     K: np.ndarray
     T_world2cam: np.ndarray
     site_ids: np.ndarray
+    camera_travel: np.ndarray | None = None
 
 
 class _Problem:
@@ -215,7 +218,10 @@ class _Problem:
                 continue  # the start state is given
             d.qpos[:] = states[t, 1:1 + self.nq]
             mujoco.mj_kinematics(m, d)
-            pc = d.site_xpos[img.site_ids] @ R.T + tr
+            sites = d.site_xpos[img.site_ids]
+            if img.camera_travel is not None:
+                sites = sites - img.camera_travel[f]
+            pc = sites @ R.T + tr
             z = np.maximum(pc[:, 2], 0.1)
             uv = np.column_stack([fx * pc[:, 0] / z, fy * pc[:, 1] / z]) + img.K[:2, 2]
             e = (uv - img.keypoints[f, :, :2]) * img.metres_per_px[f]  # (33, 2) m

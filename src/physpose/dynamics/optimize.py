@@ -380,13 +380,15 @@ def _refine(setup: _Setup, problem: WindowProblem, best: _Best, initial: dict,
     model, foot_geoms = setup.sim.model, setup.sim.body.foot_geom_ids
     feet = (foot_geoms["l"], foot_geoms["r"])
     objective, image = setup.objective, None
-    if cfg.refine.image and objective.camera_travel is None:
+    if cfg.refine.image:
         frames = win.frames
+        travel = objective.camera_travel
         image = ImageTerm(steps=np.round(problem.positions).astype(int),
                           keypoints=objective.keypoints2d[frames],
                           metres_per_px=objective.metres_per_px[frames], K=objective.camera_K,
                           T_world2cam=objective.T_world2cam,
-                          site_ids=setup.sim.body.landmark_site_ids)
+                          site_ids=setup.sim.body.landmark_site_ids,
+                          camera_travel=None if travel is None else travel[frames])
     refined = refine_targets(model, problem.state0, best.ctrl[:win.num_steps], ref.qpos[steps],
                              ref.qvel[steps], cfg.refine, cfg.nthread, feet, image)
     timing["refine"] = timing.get("refine", 0.0) + refined.seconds
