@@ -24,6 +24,8 @@ def test_presets_and_ablations():
     # The fast preset refines each window by iLQR after its search; the paper's has no
     # refinement, nor do the ablations (which remove terms of the search's objective).
     assert PRESETS["fast"].refine.enabled and not PRESETS["paper"].refine.enabled
+    # Since stop 40 the fast preset's refinement also pulls the landmarks onto the detections.
+    assert PRESETS["fast"].refine.image > 0
     assert SEARCH_ONLY == dataclasses.replace(PRESETS["fast"], refine=SEARCH_ONLY.refine)
     assert not SEARCH_ONLY.refine.enabled
     assert FULL_OBJECTIVE == dataclasses.replace(SEARCH_ONLY, weights=ObjectiveWeights())

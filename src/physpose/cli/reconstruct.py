@@ -63,7 +63,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "random walk: N times the search time (default: the preset's)")
     p.add_argument("--refine", type=int, metavar="N",
                    help="iLQR iterations refining each window's servo targets towards the "
-                        "estimate after the search (0: off; default: the preset's, 6 in fast, "
+                        "estimate and the detections after the search (0: off; default: the "
+                        "preset's, 6 in fast, "
                         "0 in paper). About 1.4 s per iteration and window on 2 cores "
                         "(docs/dynamics.md, iLQR refinement)")
     p.add_argument("--balance-hz", type=float, metavar="HZ",

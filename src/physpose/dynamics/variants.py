@@ -5,7 +5,9 @@ trajectory optimisation with the default preset); ``dynamics-so``: on the SO kin
 ``dynamics-full``: the default preset with the paper's objective terms and weights (the
 default has no COM term and adds the swing term); ``dynamics-<ablation>`` (no2d, no3d, nocom,
 nocompose, noprior): the bottom half of the paper's Table 2, that full model with objective
-terms removed. Window checkpoints go to the stage cache, so an interrupted benchmark resumes
+terms removed. ``dynamics-search``, ``dynamics-refine-noimage``, ``dynamics-ilqr`` and
+``dynamics-ilqr-image``: the default without its iLQR refinement, with the refinement as it was
+before stop 40 (no image term), and iLQR instead of the search. Window checkpoints go to the stage cache, so an interrupted benchmark resumes
 its dynamics runs.
 """
 
@@ -65,9 +67,17 @@ for _ablation in ABLATIONS:
     _name = f"dynamics-{_ablation}"
     register_variant(_name, _variant("SO+GT", ablated(FULL_OBJECTIVE, _ablation), _name))
 
-# iLQR instead of the search (ilqr.py): the fast preset's refinement without CMA-ES iterations.
+# The fast preset from stop 37 to 39: its refinement tracked the reference without the image
+# term (root position 1e3).
+_TRACKING_REFINE = RefineConfig(iterations=6)
+register_variant("dynamics-refine-noimage", _variant("SO+GT", dataclasses.replace(
+    PRESETS["fast"], refine=_TRACKING_REFINE), "dynamics-refine-noimage"))
+
+# iLQR instead of the search (ilqr.py): six iterations without CMA-ES iterations, on the
+# tracking cost alone or with the image term (the fast preset's refinement since stop 40).
 _ILQR = dataclasses.replace(PRESETS["fast"], iterations=0)
-register_variant("dynamics-ilqr", _variant("SO+GT", _ILQR, "dynamics-ilqr"))
+register_variant("dynamics-ilqr", _variant("SO+GT", dataclasses.replace(
+    _ILQR, refine=_TRACKING_REFINE), "dynamics-ilqr"))
 register_variant("dynamics-ilqr-image", _variant("SO+GT", dataclasses.replace(
     _ILQR, refine=RefineConfig(iterations=6, root_position=100.0, image=3e3)),
     "dynamics-ilqr-image"))
