@@ -196,7 +196,7 @@ PRESETS: dict[str, DynamicsConfig] = {
     # (docs/dynamics.md, iLQR refinement). Its cost also pulls the landmarks onto the
     # detections (image 3e3, root position 1e2 instead of 1e3; stop 40): MPJPE-PA and MPJPE-2d
     # about 2 mm and 2 px lower on motion capture, 2d lower on all three real videos and
-    # walking_road's skate under 5 % (docs/dynamics.md, After the search).
+    # walking_road's skate under 5 % (docs/dynamics.md, With the detections).
     "fast": DynamicsConfig(tracking_start=True, weights=ObjectiveWeights(com=0.0, swing=12.0),
                            refine=RefineConfig(iterations=6, root_position=1e2, image=3e3)),
     # The paper's budget: 2000 iterations x 100 samples per 1 s window, full covariance; its

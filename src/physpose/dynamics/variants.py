@@ -7,8 +7,8 @@ default has no COM term and adds the swing term); ``dynamics-<ablation>`` (no2d,
 nocompose, noprior): the bottom half of the paper's Table 2, that full model with objective
 terms removed. ``dynamics-search``, ``dynamics-refine-noimage``, ``dynamics-ilqr`` and
 ``dynamics-ilqr-image``: the default without its iLQR refinement, with the refinement as it was
-before stop 40 (no image term), and iLQR instead of the search. Window checkpoints go to the stage cache, so an interrupted benchmark resumes
-its dynamics runs.
+before stop 40 (no image term), and iLQR instead of the search. Window checkpoints go to the
+stage cache, so an interrupted benchmark resumes its dynamics runs.
 """
 
 from __future__ import annotations
