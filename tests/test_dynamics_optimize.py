@@ -12,6 +12,7 @@ from physpose.body import build_body
 from physpose.dynamics import TERMS, DynamicsConfig, optimize_dynamics
 from physpose.dynamics import checkpoint
 from physpose.dynamics.balance import BalanceGains
+from physpose.dynamics.ilqr import RefineConfig
 from physpose.dynamics.optimize import _cma, _window_seed, searched_dofs
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.dynamics.windows import blend_weights, plan_windows
@@ -288,3 +289,22 @@ def test_refinement_is_recorded_and_brings_the_body_nearer_the_estimate(clip):
     both = run(clip, dataclasses.replace(TINY, independent=True,
                                          refine=RefineConfig(iterations=1)), checkpoints=False)
     assert all("refine" in w for w in both.windows)
+
+
+def test_each_attempt_is_logged(clip):
+    """A window that cannot follow the estimate is retried; every attempt's handover error,
+    after its search and after its refinement, and its time are in the window's record."""
+    body, fit, obs = clip
+    jumped = fit.qpos.copy()
+    jumped[5:, 0] += 0.6
+    cfg = dataclasses.replace(TINY, retries=1, refine=RefineConfig(iterations=1))
+    res = optimize_dynamics(body, dataclasses.replace(fit, qpos=jumped), obs, cfg,
+                            checkpoints=False, progress=False)
+    retried = [w for w in res.windows if w["attempts"] == 2]
+    assert retried
+    for w in res.windows:
+        log = w["attempt_log"]
+        assert len(log) == w["attempts"] and all(a["seconds"] > 0 for a in log)
+        assert set(log[0]) == {"searched", "refined", "seconds", "refine_seconds"}
+        errors = [np.inf if a["refined"] is None else a["refined"] for a in log]
+        assert w["handover_error"] == min(errors)

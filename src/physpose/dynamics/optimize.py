@@ -353,6 +353,7 @@ def _record(win: Window, best: _Best, initial: dict, evaluations: int, seconds: 
             "initial_valid": initial["valid"], "loss_final": best.loss, "valid": best.valid,
             "start": ("inverse_dynamics", "tracking")[initial["start"]],
             "attempts": initial.get("attempts", 1), "handover_error": initial.get("handover_error"),
+            "attempt_log": initial.get("attempt_log"),
             "kept": initial.get("kept", "search 0"), "search_losses": initial.get("search_losses"),
             "terms_final": best.terms, "weights": weights.as_dict(), "seconds": seconds,
             **({"refine": initial["refine"]} if "refine" in initial else {})}
@@ -409,6 +410,10 @@ def _refine(setup: _Setup, problem: WindowProblem, best: _Best, initial: dict,
                  ctrl=traj.ctrl[0].copy()), initial
 
 
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
+
+
 def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _Setup,
                          cfg: DynamicsConfig, timing: dict, w: int, step_end: int, label: str,
                          progress: bool) -> tuple[WindowProblem, _Best, dict, int]:
@@ -416,13 +421,17 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
     than ``retry_distance`` from the estimate's (a fall in the making) or is invalid, search
     again with another seed and a larger step size, up to ``retries`` times. Keeps the attempt
     with the smallest handover error; returns its problem as searched (with its chosen start),
-    best sample, initial record and the number of evaluations."""
-    chosen, evaluations, first_start = None, 0, None
+    best sample, initial record and the number of evaluations. The record's ``attempt_log``
+    gives, per attempt, the handover error (m; None where invalid) after the search
+    (``searched``) and after the refinement (``refined``), and the attempt's seconds (all of
+    it, and the refinement's)."""
+    chosen, evaluations, first_start, attempt_log = None, 0, None, []
     # Without search iterations an attempt is only its start (and its refinement): retrying
     # makes sense only from the other start guess.
     attempts = cfg.retries + 1 if cfg.iterations else min(cfg.retries + 1,
                                                           1 + len(problem.alternatives))
     for attempt in range(attempts):
+        start = time.perf_counter()
         attempt_cfg = dataclasses.replace(cfg, sigma0=cfg.sigma0 * 1.5 ** attempt)
         # The first retry of a window with two start guesses goes on from the other one: the
         # better-scoring start can still be the one heading for a fall.
@@ -434,15 +443,21 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
         if attempt == 0:
             first_start = initial["start"]
         evaluations += count
+        error = _handover_error(setup, best, problem.window, step_end) if best.valid else np.inf
+        log = {"searched": _finite_or_none(error)}
         if cfg.refine.enabled:
             best, initial = _refine(setup, searched, best, initial, simulator, cfg, timing)
-        error = _handover_error(setup, best, problem.window, step_end) if best.valid else np.inf
+            error = _handover_error(setup, best, problem.window, step_end) if best.valid \
+                else np.inf
+            log.update(refined=_finite_or_none(error),
+                       refine_seconds=initial["refine"]["seconds"])
+        attempt_log.append(dict(log, seconds=time.perf_counter() - start))
         if chosen is None or error < chosen[3]:
             chosen = (searched, best, initial, error)
         if error <= cfg.retry_distance:
             break
     searched, best, initial, error = chosen
-    initial = dict(initial, attempts=attempt + 1, handover_error=error)
+    initial = dict(initial, attempts=attempt + 1, handover_error=error, attempt_log=attempt_log)
     return searched, best, initial, evaluations
 
 
