@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import pytest
 
@@ -67,3 +68,13 @@ def test_swing_confidence_is_in_the_key_only_where_it_changes_the_runs():
     assert fast.swing_confidence and fast.identity()["swing_confidence"] is True
     assert "swing_confidence" not in dataclasses.replace(fast, swing_confidence=False).identity()
     assert "swing_confidence" not in FULL_OBJECTIVE.identity()
+
+
+def test_refine_within_is_in_the_key_only_where_it_changes_the_runs():
+    fast = PRESETS["fast"]
+    assert fast.identity()["refine_within"] == fast.refine_within < math.inf
+    every = dataclasses.replace(fast, refine_within=math.inf)
+    assert "refine_within" not in every.identity()  # stop 40's runs and checkpoints
+    assert "refine_within" not in DynamicsConfig().identity()  # no refinement at all
+    with pytest.raises(PhysposeError, match="refine_within"):
+        DynamicsConfig(refine_within=0.0)

@@ -8,6 +8,7 @@ but the thread count is part of a run's checkpoint key (``DynamicsConfig.identit
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 from physpose.dynamics.balance import BalanceGains
@@ -53,6 +54,10 @@ class DynamicsConfig:
     state (a discontinuity instead of a fall that would carry on; recorded as reset_after); a
     window whose COM strays this far at an earlier kept frame is cut there and a window from
     that frame restarts (recorded as cut_at).
+    refine_within: m; with the refinement on, an attempt whose search hands on a COM further
+    than this from the estimate's is refined only if it is kept: a refinement moves the
+    handover by a few centimetres, so it would not stop the retry (docs/dynamics.md, Retries).
+    Infinite: every attempt is refined, as before stop 41.
     search: "all" hinges, "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
     needs; arms, neck and head keep their inverse-dynamics targets), or "legs" (hips, knees,
     ankles; the trunk keeps its start targets too). searches: CMA-ES searches of each window
@@ -106,6 +111,7 @@ class DynamicsConfig:
     # punch 627 -> 194, roll 438 -> 381, jump 402 -> 360, 131_03 235 -> 156 mm, no clip worse;
     # 0.10 was no better (docs/dynamics.md).
     reset_distance: float = 0.15
+    refine_within: float = 0.3
     search: str = "legs_trunk"
     searches: int = 1
     candidates: int = 1
@@ -133,6 +139,9 @@ class DynamicsConfig:
         if self.search not in SEARCH_SETS:
             raise PhysposeError(f"dynamics search {self.search!r} is unknown",
                                 remedy=f"use one of {SEARCH_SETS}")
+        if not self.refine_within > 0:
+            raise PhysposeError(f"dynamics refine_within={self.refine_within} must be > 0",
+                                remedy="use e.g. 0.3 (m), or inf to refine every attempt")
         if self.retries < 0 or not self.retry_distance > 0 or not self.reset_distance > 0:
             raise PhysposeError(f"dynamics retries={self.retries} must be >= 0, retry_distance="
                                 f"{self.retry_distance} and reset_distance={self.reset_distance}"
@@ -158,6 +167,8 @@ class DynamicsConfig:
             out.pop("swing_confidence")  # likewise (added in stop 33; moot without the term)
         if self.searches == 1:
             out.pop("searches")  # likewise one search per window (averaging added in stop 25)
+        if not self.refine.enabled or self.refine_within == math.inf:
+            out.pop("refine_within")  # likewise every attempt refined (stop 41)
         if not self.refine.enabled:
             out.pop("refine")  # likewise no iLQR refinement (added in stop 36)
         elif self.refine.keep_ratio == UNKEYED_KEEP_RATIO:

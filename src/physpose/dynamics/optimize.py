@@ -423,8 +423,9 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
     with the smallest handover error; returns its problem as searched (with its chosen start),
     best sample, initial record and the number of evaluations. The record's ``attempt_log``
     gives, per attempt, the handover error (m; None where invalid) after the search
-    (``searched``) and after the refinement (``refined``), and the attempt's seconds (all of
-    it, and the refinement's)."""
+    (``searched``) and after the refinement (``refined``, absent where it was not refined),
+    and the attempt's seconds (all of it, and the refinement's). An attempt whose search
+    hands on a COM further than ``refine_within`` is refined only if it is kept."""
     chosen, evaluations, first_start, attempt_log = None, 0, None, []
     # Without search iterations an attempt is only its start (and its refinement): retrying
     # makes sense only from the other start guess.
@@ -444,21 +445,36 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
             first_start = initial["start"]
         evaluations += count
         error = _handover_error(setup, best, problem.window, step_end) if best.valid else np.inf
-        log = {"searched": _finite_or_none(error)}
-        if cfg.refine.enabled:
-            best, initial = _refine(setup, searched, best, initial, simulator, cfg, timing)
-            error = _handover_error(setup, best, problem.window, step_end) if best.valid \
-                else np.inf
-            log.update(refined=_finite_or_none(error),
-                       refine_seconds=initial["refine"]["seconds"])
-        attempt_log.append(dict(log, seconds=time.perf_counter() - start))
+        attempt_log.append({"searched": _finite_or_none(error)})
+        # A refinement moves the handover by centimetres: one that cannot bring the attempt
+        # under retry_distance is spent only if the attempt is kept (below).
+        refined = cfg.refine.enabled and error <= cfg.refine_within
+        if refined:
+            best, initial, error = _refine_logged(setup, searched, best, initial, simulator, cfg,
+                                                  timing, step_end, attempt_log[-1])
+        attempt_log[-1]["seconds"] = time.perf_counter() - start
         if chosen is None or error < chosen[3]:
-            chosen = (searched, best, initial, error)
+            chosen = (searched, best, initial, error, attempt, refined)
         if error <= cfg.retry_distance:
             break
-    searched, best, initial, error = chosen
+    searched, best, initial, error, kept, refined = chosen
+    if cfg.refine.enabled and not refined:
+        start = time.perf_counter()
+        best, initial, error = _refine_logged(setup, searched, best, initial, simulator, cfg,
+                                              timing, step_end, attempt_log[kept])
+        attempt_log[kept]["seconds"] += time.perf_counter() - start
     initial = dict(initial, attempts=attempt + 1, handover_error=error, attempt_log=attempt_log)
     return searched, best, initial, evaluations
+
+
+def _refine_logged(setup: _Setup, searched: WindowProblem, best: _Best, initial: dict,
+                   simulator: Simulator, cfg: DynamicsConfig, timing: dict, step_end: int,
+                   log: dict) -> tuple[_Best, dict, float]:
+    """_refine, then the handover error of its result, both noted in an attempt's ``log``."""
+    best, initial = _refine(setup, searched, best, initial, simulator, cfg, timing)
+    error = _handover_error(setup, best, searched.window, step_end) if best.valid else np.inf
+    log.update(refined=_finite_or_none(error), refine_seconds=initial["refine"]["seconds"])
+    return best, initial, error
 
 
 def _stray_frame(setup: _Setup, win: Window, com: np.ndarray, cfg: DynamicsConfig
