@@ -86,6 +86,10 @@ def test_refinement_off_leaves_checkpoint_keys_as_they_were():
     assert "keep_ratio" not in old.identity()["refine"]
     stricter = DynamicsConfig(refine=RefineConfig(iterations=3, keep_ratio=1.1))
     assert stricter.identity()["refine"]["keep_ratio"] == 1.1
+    # Likewise the depth term, off (0) unless asked for.
+    assert "root_depth" not in on.identity()["refine"]
+    deep = DynamicsConfig(refine=RefineConfig(iterations=3, root_depth=900.0))
+    assert deep.identity()["refine"]["root_depth"] == 900.0
 
 
 def test_threads_do_not_change_the_result(stepping):
@@ -168,3 +172,32 @@ def test_the_image_term_pulls_the_body_onto_the_detections(stepping, travelling)
     with_image = image_error(RefineConfig(iterations=3, root_position=100.0, foot_slide=0.0,
                                           image=3e3))
     assert with_image < 0.7 * without
+
+
+def test_the_depth_term_holds_the_root_along_the_line_of_sight(stepping):
+    """The reference is the true motion moved 10 cm away from the camera, with the root
+    loosely tracked: root_depth keeps the refined root nearer the reference along the line of
+    sight (where the detections hardly see it) than the same refinement without it."""
+    from physpose.dynamics.ilqr import ImageTerm  # noqa: PLC0415
+    from physpose.dynamics.synthetic import virtual_camera  # noqa: PLC0415
+
+    sim, state0, targets, truth = stepping
+    K, T = virtual_camera()
+    centre = -T[:3, :3].T @ T[:3, 3]
+    qpos, qvel = truth[:, 1:1 + NQ].copy(), truth[:, 1 + NQ:1 + NQ + NV]
+    sight = qpos[:, :3] - centre
+    sight /= np.linalg.norm(sight, axis=1, keepdims=True)
+    qpos[:, :3] += 0.10 * sight
+    steps = np.arange(8, len(truth), 8)
+    camera = ImageTerm(steps=steps, keypoints=np.zeros((len(steps), 33, 3)),
+                       metres_per_px=np.full(len(steps), 0.004), K=K, T_world2cam=T,
+                       site_ids=sim.body.landmark_site_ids)
+
+    def depth_error(root_depth: float) -> float:
+        cfg = RefineConfig(iterations=8, root_position=10.0, foot_slide=0.0,
+                           root_depth=root_depth)
+        refined = refine_targets(sim.model, state0, targets, qpos, qvel, cfg, image=camera)
+        off = refined.states[1:, 1:4] - qpos[1:, :3]
+        return float(np.abs(np.einsum("ti,ti->t", off, sight[1:])).mean())
+
+    assert depth_error(3e3) < 0.5 * depth_error(0.0)

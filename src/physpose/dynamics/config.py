@@ -171,8 +171,11 @@ class DynamicsConfig:
             out.pop("refine_within")  # likewise every attempt refined (stop 41)
         if not self.refine.enabled:
             out.pop("refine")  # likewise no iLQR refinement (added in stop 36)
-        elif self.refine.keep_ratio == UNKEYED_KEEP_RATIO:
-            out["refine"].pop("keep_ratio")  # likewise the keep test before it was a setting
+        else:
+            if self.refine.keep_ratio == UNKEYED_KEEP_RATIO:
+                out["refine"].pop("keep_ratio")  # likewise the keep test before it was a setting
+            if self.refine.root_depth == 0:
+                out["refine"].pop("root_depth")  # likewise no depth term (stop 41)
         return out
 
     def window_identity(self) -> dict:

@@ -68,7 +68,8 @@ class RefineConfig:
     away from their start), foot_slide (s^2/m^2, the horizontal speed of the lowest corner of
     a foot box that is on the floor), image (1/m^2 per landmark and frame: the detections'
     re-projection error, in metres at the person's depth, confidence-weighted, Huber beyond
-    image_huber m);
+    image_huber m), root_depth (1/m^2: added to root_position along the camera's line of sight
+    to the reference root, where the image cannot see; needs the camera of ``ImageTerm``);
     terminal: the last state's weight multiplier.
     keep_ratio: a window keeps the refined targets when their objective (the search's, not
     this tracking cost) is at most keep_ratio times the search's result.
@@ -86,6 +87,7 @@ class RefineConfig:
     foot_slide: float = 300.0
     image: float = 0.0
     image_huber: float = 0.03
+    root_depth: float = 0.0
     terminal: float = 5.0
     keep_ratio: float = 1.5
     derivative_stride: int = 2
@@ -143,6 +145,8 @@ class _Problem:
                  feet: tuple[int, ...] = (), image: ImageTerm | None = None):
         self.model, self.state0, self.cfg = model, state0, cfg
         self.image = image if cfg.image else None
+        self.sight = _lines_of_sight(ref_qpos[:, :3], image) \
+            if cfg.root_depth and image is not None else None
         self.feet = feet
         self.ref_qpos, self.ref_qvel, self.u_start = ref_qpos, ref_qvel, u_start
         self.nv, self.nq = model.nv, model.nq
@@ -243,6 +247,36 @@ class _Problem:
                            np.einsum("l,liv,liw->vw", weight, J, J))
         return total, out
 
+    def depth_terms(self, states: np.ndarray, derivatives: bool
+                    ) -> tuple[float, dict[int, tuple[np.ndarray, np.ndarray]]]:
+        """The root-depth cost and, per state index, its gradient (nv,) and Hessian (nv, nv)
+        in the positions (the root translation's tangent axes are the world's)."""
+        if self.sight is None:
+            return 0.0, {}
+        n = len(states) - 1
+        scale = np.ones(n + 1)
+        scale[0], scale[-1] = 0.0, self.cfg.terminal
+        along = np.einsum("ti,ti->t", self._qpos(states)[:, :3] - self.ref_qpos[:, :3],
+                          self.sight)
+        w = self.cfg.root_depth * scale
+        total = 0.5 * float(np.sum(w * along ** 2))
+        out = {}
+        if derivatives:
+            for t in range(1, n + 1):
+                g, H = np.zeros(self.nv), np.zeros((self.nv, self.nv))
+                g[:3] = w[t] * along[t] * self.sight[t]
+                H[:3, :3] = w[t] * np.outer(self.sight[t], self.sight[t])
+                out[t] = (g, H)
+        return total, out
+
+    def position_terms(self, states: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray]]:
+        """The image and depth terms' gradients and Hessians, summed per state index."""
+        out: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        for terms in (self.image_terms(states, True)[1], self.depth_terms(states, True)[1]):
+            for t, (g, H) in terms.items():
+                out[t] = (out[t][0] + g, out[t][1] + H) if t in out else (g, H)
+        return out
+
     def cost(self, states: np.ndarray, ctrl: np.ndarray) -> float:
         if not np.isfinite(states).all():
             return np.inf
@@ -252,7 +286,8 @@ class _Problem:
         qvel = self._qvel(states)
         for t, J in self.slide_jacobians(states).items():
             value += 0.5 * self.cfg.foot_slide * np.sum((J @ qvel[t]) ** 2)
-        return float(value + self.image_terms(states, False)[0])
+        return float(value + self.image_terms(states, False)[0]
+                     + self.depth_terms(states, False)[0])
 
     def rollout(self, ctrl: np.ndarray, gains: tuple | None = None, step: float = 0.0
                 ) -> tuple[np.ndarray, np.ndarray]:
@@ -314,7 +349,7 @@ class _Problem:
             H = self.cfg.foot_slide * np.einsum("kiv,kiw->vw", J, J)
             lx[t, nv:] += H @ qvel[t]
             slide_h[t] = H
-        _, image = self.image_terms(states, True)
+        image = self.position_terms(states)
         for t, (g, _) in image.items():
             lx[t, :nv] += g
         lu = self.cfg.control * (ctrl - self.u_start)
@@ -349,6 +384,19 @@ class _Problem:
             vxx = qxx + K.T @ quu @ K + K.T @ qux + qux.T @ K
             vxx = 0.5 * (vxx + vxx.T)
         return ks, Ks
+
+
+def _lines_of_sight(root: np.ndarray, camera: ImageTerm) -> np.ndarray:
+    """(n+1, 3) unit vectors from the camera's centre to the reference root at each state
+    (a travelling camera's centre moved on by its path, interpolated between frames)."""
+    R, tr = camera.T_world2cam[:3, :3], camera.T_world2cam[:3, 3]
+    centre = np.broadcast_to(-R.T @ tr, root.shape).copy()
+    if camera.camera_travel is not None:
+        steps = np.arange(len(root))
+        centre += np.column_stack([np.interp(steps, camera.steps, camera.camera_travel[:, i])
+                                   for i in range(3)])
+    sight = root - centre
+    return sight / np.maximum(np.linalg.norm(sight, axis=1, keepdims=True), 1e-9)
 
 
 def refine_targets(model: mujoco.MjModel, state0: np.ndarray, ctrl: np.ndarray,

@@ -381,7 +381,7 @@ def _refine(setup: _Setup, problem: WindowProblem, best: _Best, initial: dict,
     model, foot_geoms = setup.sim.model, setup.sim.body.foot_geom_ids
     feet = (foot_geoms["l"], foot_geoms["r"])
     objective, image = setup.objective, None
-    if cfg.refine.image:
+    if cfg.refine.image or cfg.refine.root_depth:
         frames = win.frames
         travel = objective.camera_travel
         image = ImageTerm(steps=np.round(problem.positions).astype(int),
