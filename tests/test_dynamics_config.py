@@ -9,7 +9,7 @@ import pytest
 
 from physpose.dynamics import ABLATIONS, PRESETS, DynamicsConfig, ablated
 from physpose.dynamics.objective import ObjectiveWeights
-from physpose.dynamics.variants import FULL_OBJECTIVE, SEARCH_ONLY
+from physpose.dynamics.variants import EVERY_ATTEMPT, FULL_OBJECTIVE, SEARCH_ONLY
 from physpose.errors import PhysposeError
 
 
@@ -27,7 +27,8 @@ def test_presets_and_ablations():
     assert PRESETS["fast"].refine.enabled and not PRESETS["paper"].refine.enabled
     # Since stop 40 the fast preset's refinement also pulls the landmarks onto the detections.
     assert PRESETS["fast"].refine.image > 0
-    assert SEARCH_ONLY == dataclasses.replace(PRESETS["fast"], refine=SEARCH_ONLY.refine)
+    assert SEARCH_ONLY == dataclasses.replace(PRESETS["fast"], refine=SEARCH_ONLY.refine,
+                                              retries=2)
     assert not SEARCH_ONLY.refine.enabled
     assert FULL_OBJECTIVE == dataclasses.replace(SEARCH_ONLY, weights=ObjectiveWeights())
     for name, terms in ABLATIONS.items():
@@ -78,3 +79,9 @@ def test_refine_within_is_in_the_key_only_where_it_changes_the_runs():
     assert "refine_within" not in DynamicsConfig().identity()  # no refinement at all
     with pytest.raises(PhysposeError, match="refine_within"):
         DynamicsConfig(refine_within=0.0)
+
+
+def test_the_fast_preset_retries_once_and_the_earlier_variants_twice():
+    assert PRESETS["fast"].retries == 1
+    assert EVERY_ATTEMPT.retries == 2 and EVERY_ATTEMPT.refine_within == math.inf
+    assert EVERY_ATTEMPT.refine == PRESETS["fast"].refine
