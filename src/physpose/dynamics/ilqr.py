@@ -32,7 +32,9 @@ estimate the search follows; the control term keeps the targets near where they 
 estimate's standing feet slide where it is noisy, and a body made to follow its root closely
 would slide its feet too: the foot-slide term (Gauss-Newton, on the horizontal velocity of the
 lowest corner of each foot box within 1 cm of the floor, the point a sliding foot drags) keeps
-them where they stand, while a foot may still roll over its toe or heel edge.
+them where they stand, while a foot may still roll over its toe or heel edge. Optional terms:
+the detections' re-projection error (``image``, Gauss-Newton through the landmark sites'
+Jacobians) and the root's offset along the camera's line of sight (``root_depth``).
 
 The fast preset runs six iterations after every window's search (measured on motion capture:
 nearer the truth on everyday motions, fewer restarts, a little further on athletic ones;
