@@ -159,9 +159,9 @@ class _Problem:
         wv = np.full(self.nv, cfg.hinge_velocity)
         wv[:6] = cfg.root_velocity
         n = len(u_start)
-        scale = np.ones(n + 1)
-        scale[0], scale[-1] = 0.0, cfg.terminal  # the start state is given
-        self.lxx = np.concatenate([wq, wv])[None] * scale[:, None]  # (n+1, 2 nv) diagonal
+        self.step_scale = np.ones(n + 1)  # per state: the start is given, the last weighs more
+        self.step_scale[0], self.step_scale[-1] = 0.0, cfg.terminal
+        self.lxx = np.concatenate([wq, wv])[None] * self.step_scale[:, None]  # (n+1, 2 nv)
 
     def _qpos(self, states: np.ndarray) -> np.ndarray:
         return states[:, 1:1 + self.nq]
@@ -255,16 +255,13 @@ class _Problem:
         in the positions (the root translation's tangent axes are the world's)."""
         if self.sight is None:
             return 0.0, {}
-        n = len(states) - 1
-        scale = np.ones(n + 1)
-        scale[0], scale[-1] = 0.0, self.cfg.terminal
         along = np.einsum("ti,ti->t", self._qpos(states)[:, :3] - self.ref_qpos[:, :3],
                           self.sight)
-        w = self.cfg.root_depth * scale
+        w = self.cfg.root_depth * self.step_scale
         total = 0.5 * float(np.sum(w * along ** 2))
         out = {}
         if derivatives:
-            for t in range(1, n + 1):
+            for t in range(1, len(states)):
                 g, H = np.zeros(self.nv), np.zeros((self.nv, self.nv))
                 g[:3] = w[t] * along[t] * self.sight[t]
                 H[:3, :3] = w[t] * np.outer(self.sight[t], self.sight[t])

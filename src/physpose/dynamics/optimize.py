@@ -363,7 +363,10 @@ _OUTPUT_KEYS = ("qpos", "joints", "landmarks", "com")
 
 
 def _handover_error(setup: _Setup, best: _Best, win: Window, step_end: int) -> float:
-    """Distance (m) between the simulated and the kinematic COM where the next window starts."""
+    """Distance (m) between the simulated and the kinematic COM where the next window starts
+    (infinite for an invalid result)."""
+    if not best.valid:
+        return np.inf
     com = best.sensors[step_end - win.start_step, -3:]
     frame = int(round(step_end * setup.sim.dt * setup.objective.fps))
     return float(np.linalg.norm(com - setup.objective.com[min(frame, len(setup.objective.com) - 1)]))
@@ -444,7 +447,7 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
         if attempt == 0:
             first_start = initial["start"]
         evaluations += count
-        error = _handover_error(setup, best, problem.window, step_end) if best.valid else np.inf
+        error = _handover_error(setup, best, problem.window, step_end)
         attempt_log.append({"searched": _finite_or_none(error)})
         # A refinement moves the handover by centimetres: one that cannot bring the attempt
         # under retry_distance is spent only if the attempt is kept (below).
@@ -472,7 +475,7 @@ def _refine_logged(setup: _Setup, searched: WindowProblem, best: _Best, initial:
                    log: dict) -> tuple[_Best, dict, float]:
     """_refine, then the handover error of its result, both noted in an attempt's ``log``."""
     best, initial = _refine(setup, searched, best, initial, simulator, cfg, timing)
-    error = _handover_error(setup, best, searched.window, step_end) if best.valid else np.inf
+    error = _handover_error(setup, best, searched.window, step_end)
     log.update(refined=_finite_or_none(error), refine_seconds=initial["refine"]["seconds"])
     return best, initial, error
 

@@ -9,8 +9,8 @@ terms removed. ``dynamics-search``, ``dynamics-refine-every``, ``dynamics-refine
 ``dynamics-ilqr`` and ``dynamics-ilqr-image``: the search alone (no iLQR refinement), the
 default of stop 40 (two retries, every attempt of a window refined), the refinement as it was
 before stop 40 (no image term), and iLQR instead of the search; all with two retries, as
-measured before stop 41. Window checkpoints go to the
-stage cache, so an interrupted benchmark resumes its dynamics runs.
+measured before stop 41. Window checkpoints go to the stage cache, so an interrupted
+benchmark resumes its dynamics runs.
 """
 
 from __future__ import annotations
