@@ -81,6 +81,16 @@ def test_refine_within_is_in_the_key_only_where_it_changes_the_runs():
         DynamicsConfig(refine_within=0.0)
 
 
+def test_retry_within_is_in_the_key_only_where_it_changes_the_runs():
+    fast = PRESETS["fast"]
+    hopeless = dataclasses.replace(fast, retry_within=0.5)
+    assert hopeless.identity()["retry_within"] == 0.5
+    assert "retry_within" not in dataclasses.replace(fast, retry_within=math.inf).identity()
+    assert "retry_within" not in dataclasses.replace(hopeless, retries=0).identity()
+    with pytest.raises(PhysposeError, match="retry_within"):
+        DynamicsConfig(retry_within=-1.0)
+
+
 def test_the_fast_preset_retries_once_and_the_earlier_variants_twice():
     assert PRESETS["fast"].retries == 1
     assert EVERY_ATTEMPT.retries == 2 and EVERY_ATTEMPT.refine_within == math.inf

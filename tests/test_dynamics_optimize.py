@@ -316,3 +316,18 @@ def test_each_attempt_is_logged(clip, refine_within):
             assert refined == log and w["handover_error"] == min(errors)
         else:  # no attempt comes within 1 mm: only the kept one is refined, retried or not
             assert len(refined) == 1 and w["handover_error"] == errors[0]
+
+
+def test_a_window_missing_by_more_than_retry_within_is_not_retried(clip):
+    """The displaced estimate of the test above, whose windows were retried: with
+    retry_within 1 mm no window is, and each keeps (and refines) its one attempt."""
+    body, fit, obs = clip
+    jumped = fit.qpos.copy()
+    jumped[5:, 0] += 0.6
+    cfg = dataclasses.replace(TINY, retries=1, refine=RefineConfig(iterations=1),
+                              retry_within=1e-3)
+    res = optimize_dynamics(body, dataclasses.replace(fit, qpos=jumped), obs, cfg,
+                            checkpoints=False, progress=False)
+    for w in res.windows:
+        assert w["attempts"] == 1 and len(w["attempt_log"]) == 1
+        assert "refined" in w["attempt_log"][0]

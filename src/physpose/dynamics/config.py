@@ -59,6 +59,11 @@ class DynamicsConfig:
     handover by 8 mm (median), and none of 82 attempts searched beyond 0.3 m came within the
     retry distance (docs/dynamics.md, Fewer attempts refined, one retry). Infinite: every
     attempt is refined, as before stop 41.
+    retry_within: m; an attempt whose search hands on a COM further than this from the
+    estimate's (or an invalid state) is not retried: in stop 41's runs, retries after a first
+    search beyond 0.5 m brought 1 of 34 windows within the retry distance and took 11 % of
+    the dynamics time (docs/dynamics.md, Hopeless windows). Infinite: retried up to
+    ``retries`` times whatever the miss, as before stop 42.
     search: "all" hinges, "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
     needs; arms, neck and head keep their inverse-dynamics targets), or "legs" (hips, knees,
     ankles; the trunk keeps its start targets too). searches: CMA-ES searches of each window
@@ -113,6 +118,7 @@ class DynamicsConfig:
     # 0.10 was no better (docs/dynamics.md).
     reset_distance: float = 0.15
     refine_within: float = 0.3
+    retry_within: float = math.inf
     search: str = "legs_trunk"
     searches: int = 1
     candidates: int = 1
@@ -143,6 +149,9 @@ class DynamicsConfig:
         if not self.refine_within > 0:
             raise PhysposeError(f"dynamics refine_within={self.refine_within} must be > 0",
                                 remedy="use e.g. 0.3 (m), or inf to refine every attempt")
+        if not self.retry_within > 0:
+            raise PhysposeError(f"dynamics retry_within={self.retry_within} must be > 0",
+                                remedy="use e.g. 0.5 (m), or inf to retry whatever the miss")
         if self.retries < 0 or not self.retry_distance > 0 or not self.reset_distance > 0:
             raise PhysposeError(f"dynamics retries={self.retries} must be >= 0, retry_distance="
                                 f"{self.retry_distance} and reset_distance={self.reset_distance}"
@@ -168,6 +177,8 @@ class DynamicsConfig:
             out.pop("swing_confidence")  # likewise (added in stop 33; moot without the term)
         if self.searches == 1:
             out.pop("searches")  # likewise one search per window (averaging added in stop 25)
+        if self.retries == 0 or self.retry_within == math.inf:
+            out.pop("retry_within")  # likewise retried whatever the miss (stop 42)
         if not self.refine.enabled or self.refine_within == math.inf:
             out.pop("refine_within")  # likewise every attempt refined (stop 41)
         if not self.refine.enabled:

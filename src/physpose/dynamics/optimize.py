@@ -428,7 +428,8 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
     gives, per attempt, the handover error (m; None where invalid) after the search
     (``searched``) and after the refinement (``refined``, absent where it was not refined),
     and the attempt's seconds (all of it, and the refinement's). An attempt whose search
-    hands on a COM further than ``refine_within`` is refined only if it is kept."""
+    hands on a COM further than ``refine_within`` is refined only if it is kept; one whose
+    search hands on a COM further than ``retry_within`` (or an invalid state) is not retried."""
     chosen, evaluations, first_start, attempt_log = None, 0, None, []
     # Without search iterations an attempt is only its start (and its refinement): retrying
     # makes sense only from the other start guess.
@@ -452,13 +453,14 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
         # A refinement moves the handover by centimetres: one that cannot bring the attempt
         # under retry_distance is spent only if the attempt is kept (below).
         refined = cfg.refine.enabled and error <= cfg.refine_within
+        hopeless = not error <= cfg.retry_within
         if refined:
             best, initial, error = _refine_logged(setup, searched, best, initial, simulator, cfg,
                                                   timing, step_end, attempt_log[-1])
         attempt_log[-1]["seconds"] = time.perf_counter() - start
         if chosen is None or error < chosen[3]:
             chosen = (searched, best, initial, error, attempt, refined)
-        if error <= cfg.retry_distance:
+        if error <= cfg.retry_distance or hopeless:
             break
     searched, best, initial, error, kept, refined = chosen
     if cfg.refine.enabled and not refined:
