@@ -61,8 +61,8 @@ class DynamicsConfig:
     attempt is refined, as before stop 41.
     retry_within: m; an attempt whose search hands on a COM further than this from the
     estimate's (or an invalid state) is not retried: in stop 41's runs, retries after a first
-    search beyond 0.5 m brought 1 of 34 windows within the retry distance and took 11 % of
-    the dynamics time (docs/dynamics.md, Hopeless windows). Infinite: retried up to
+    search beyond 0.5 m brought 1 of 34 windows within the retry distance and took a tenth of
+    the windows' time (docs/dynamics.md, Hopeless windows). Infinite: retried up to
     ``retries`` times whatever the miss, as before stop 42.
     search: "all" hinges, "legs_trunk" (hips, knees, ankles, spine, thorax: what balance
     needs; arms, neck and head keep their inverse-dynamics targets), or "legs" (hips, knees,
@@ -228,9 +228,12 @@ PRESETS: dict[str, DynamicsConfig] = {
     # retry distance. The two real videos that retry took 0.62x and 0.48x the time at the same
     # figures; on motion capture MPJPE within 1 mm, foot skate 3.1 -> 4.2 % (+1.1 +- 0.8)
     # (docs/dynamics.md, Fewer attempts refined, one retry).
+    # No retry after a first search that misses by more than 0.5 m (stop 42): on the 15
+    # motion-capture clips 0.90x the rollouts, MPJPE-G +1.1 +- 1.0 mm (run +15, the others
+    # within 1 mm), pose2sim unchanged within 1 mm (docs/dynamics.md, Hopeless windows).
     "fast": DynamicsConfig(tracking_start=True, weights=ObjectiveWeights(com=0.0, swing=12.0),
                            refine=RefineConfig(iterations=6, root_position=1e2, image=3e3),
-                           retries=1),
+                           retries=1, retry_within=0.5),
     # The paper's budget: 2000 iterations x 100 samples per 1 s window, full covariance; its
     # reference is the grounded estimate as it is (no flattened stance feet).
     "paper": DynamicsConfig(popsize=100, iterations=2000, diagonal=False, search="all",
