@@ -291,18 +291,23 @@ def test_refinement_is_recorded_and_brings_the_body_nearer_the_estimate(clip):
     assert all("refine" in w for w in both.windows)
 
 
+def _displaced_by_60cm(clip, **config):
+    """Optimise the clip whose estimate jumps 0.6 m sideways after frame 5 (which no window
+    can follow), one retry and one refinement iteration per window, ``config`` on top."""
+    body, fit, obs = clip
+    jumped = fit.qpos.copy()
+    jumped[5:, 0] += 0.6
+    cfg = dataclasses.replace(TINY, retries=1, refine=RefineConfig(iterations=1), **config)
+    return optimize_dynamics(body, dataclasses.replace(fit, qpos=jumped), obs, cfg,
+                             checkpoints=False, progress=False)
+
+
 @pytest.mark.parametrize("refine_within", [np.inf, 1e-3])
 def test_each_attempt_is_logged(clip, refine_within):
     """A window that cannot follow the estimate is retried; every attempt's handover error,
     after its search and after its refinement, and its time are in the window's record. An
     attempt that hands on from further than refine_within is refined only if it is kept."""
-    body, fit, obs = clip
-    jumped = fit.qpos.copy()
-    jumped[5:, 0] += 0.6
-    cfg = dataclasses.replace(TINY, retries=1, refine=RefineConfig(iterations=1),
-                              refine_within=refine_within)
-    res = optimize_dynamics(body, dataclasses.replace(fit, qpos=jumped), obs, cfg,
-                            checkpoints=False, progress=False)
+    res = _displaced_by_60cm(clip, refine_within=refine_within)
     retried = [w for w in res.windows if w["attempts"] == 2]
     assert retried
     for w in res.windows:
@@ -321,13 +326,7 @@ def test_each_attempt_is_logged(clip, refine_within):
 def test_a_window_missing_by_more_than_retry_within_is_not_retried(clip):
     """The displaced estimate of the test above, whose windows were retried: with
     retry_within 1 mm no window is, and each keeps (and refines) its one attempt."""
-    body, fit, obs = clip
-    jumped = fit.qpos.copy()
-    jumped[5:, 0] += 0.6
-    cfg = dataclasses.replace(TINY, retries=1, refine=RefineConfig(iterations=1),
-                              retry_within=1e-3)
-    res = optimize_dynamics(body, dataclasses.replace(fit, qpos=jumped), obs, cfg,
-                            checkpoints=False, progress=False)
+    res = _displaced_by_60cm(clip, retry_within=1e-3)
     for w in res.windows:
         assert w["attempts"] == 1 and len(w["attempt_log"]) == 1
         assert "refined" in w["attempt_log"][0]

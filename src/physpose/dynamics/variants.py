@@ -10,8 +10,9 @@ terms removed. ``dynamics-search``, ``dynamics-refine-every``, ``dynamics-refine
 default of stop 40 (two retries, every attempt of a window refined), the refinement as it was
 before stop 40 (no image term), and iLQR instead of the search; all with two retries, as
 measured before stop 41, and every window retried whatever its miss, as before stop 42.
-``dynamics-retry-all``: the default of stop 41 (one retry, whatever the first search's miss). Window checkpoints go to the stage cache, so an interrupted
-benchmark resumes its dynamics runs.
+``dynamics-retry-all``: the default of stop 41 (one retry, whatever the first search's miss).
+Window checkpoints go to the stage cache, so an interrupted benchmark resumes its dynamics
+runs.
 """
 
 from __future__ import annotations
