@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from types import SimpleNamespace
 
 import pytest
 
@@ -104,3 +105,37 @@ def test_the_presets_retry_hopeless_windows_and_a_variant_does_not():
     for config in (*PRESETS.values(), EVERY_ATTEMPT, SEARCH_ONLY, FULL_OBJECTIVE):
         assert config.retry_within == math.inf and "retry_within" not in config.identity()
     assert NO_HOPELESS_RETRY == dataclasses.replace(PRESETS["fast"], retry_within=0.5)
+
+
+def test_the_benchmark_seed_reaches_the_search_and_seed_0_changes_nothing(monkeypatch):
+    """`physpose benchmark --seed N` (VariantContext.seed) offsets the CMA-ES seed of the
+    dynamics variants as well as drawing the detector noise; under seed 0 the configs, and so
+    their checkpoint keys, are those measured before it did."""
+    import physpose.dynamics.variants as dynamics_variants
+    import physpose.kinematics.fit as kinematics_fit
+    from physpose.benchmark import VariantContext, get_variant
+    from physpose.benchmark import oracle
+    from physpose.shape import BodyShape
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def optimise(body, kin, obs, config, progress):
+        seen.append((config, body.model.opt.timestep))
+        raise Stop
+
+    kin = SimpleNamespace(shape=BodyShape.from_height(1.7))
+    monkeypatch.setattr(kinematics_fit, "fit_kinematics", lambda *args, **kwargs: kin)
+    monkeypatch.setattr(oracle, "_truth_fit", lambda *args: kin)
+    monkeypatch.setattr(dynamics_variants, "optimize_dynamics", optimise)
+    monkeypatch.setattr("physpose.dynamics.optimize.optimize_dynamics", optimise)
+    for name in ("dynamics", "dynamics-truth", "dynamics-10ms"):
+        for seed in (0, 3):
+            with pytest.raises(Stop):
+                get_variant(name)(None, VariantContext(seed=seed))
+    fast, ten_ms = PRESETS["fast"], dynamics_variants.TEN_MS_STEPS
+    assert seen == [(fast, 0.005), (dataclasses.replace(fast, seed=3), 0.005)] * 2 + [
+        (ten_ms, 0.01), (dataclasses.replace(ten_ms, seed=3), 0.01)]
+    assert ten_ms.refine.derivative_stride == 1 and fast.refine.derivative_stride == 2

@@ -73,12 +73,13 @@ def dynamics_truth_variant(obs: Observations, context: VariantContext) -> Recons
     """The trajectory optimisation (default preset) following the truth put onto the body."""
     from physpose.dynamics.config import PRESETS  # noqa: PLC0415 (keeps the registry light)
     from physpose.dynamics.optimize import optimize_dynamics  # noqa: PLC0415
+    from physpose.dynamics.variants import seeded  # noqa: PLC0415
 
     start = time.perf_counter()
     kin = _truth_fit(obs, context, "dynamics-truth")
     kin_s = time.perf_counter() - start
     body = build_body(kin.shape)
-    phys = optimize_dynamics(body, kin, obs, PRESETS["fast"], progress=False)
+    phys = optimize_dynamics(body, kin, obs, seeded(PRESETS["fast"], context), progress=False)
     recon = kin.to_reconstruction(obs, body_mjcf=body.xml)
     meta = dict(recon.meta, variant="dynamics-truth", dynamics=phys.meta(),
                 timings_s={"kinematics": kin_s, "dynamics": phys.timings["total"]})

@@ -47,7 +47,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="also give variants the camera pose (ground figures are then trivial)")
     p.add_argument("--known-height", action="store_true",
                    help="give variants the person's stature when the material has it (mocap)")
-    p.add_argument("--seed", type=int, default=0, help="detector simulator seed")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the detector simulator's noise and of the dynamics variants' "
+                        "CMA-ES (added to their own; default 0)")
     p.add_argument("--noiseless", action="store_true",
                    help="simulate motion-capture detections without noise or biases: an oracle "
                         "input, so what a variant still loses is its own error")
