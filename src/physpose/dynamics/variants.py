@@ -37,7 +37,7 @@ def seeded(config: DynamicsConfig, context: VariantContext) -> DynamicsConfig:
     """The config with its CMA-ES seed offset by the benchmark's seed (``--seed``), which also
     draws the detector simulator's noise. Seed 0 leaves the config, and its checkpoint keys, as
     they were."""
-    return dataclasses.replace(config, seed=config.seed + context.seed) if context.seed else config
+    return dataclasses.replace(config, seed=config.seed + context.seed)
 
 
 def run_dynamics_variant(obs: Observations, context: VariantContext, kinematic_variant: str,
