@@ -17,7 +17,6 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from physpose.benchmark.variants import VariantContext, register_variant
-from physpose.body import build_body
 from physpose.errors import PhysposeError
 from physpose.fk import fk, fk_qpos
 from physpose.kinematics.ik import inverse_kinematics
@@ -72,18 +71,12 @@ def truth_ik_variant(obs: Observations, context: VariantContext) -> Reconstructi
 def dynamics_truth_variant(obs: Observations, context: VariantContext) -> Reconstruction:
     """The trajectory optimisation (default preset) following the truth put onto the body."""
     from physpose.dynamics.config import PRESETS  # noqa: PLC0415 (keeps the registry light)
-    from physpose.dynamics.optimize import optimize_dynamics  # noqa: PLC0415
-    from physpose.dynamics.variants import seeded  # noqa: PLC0415
+    from physpose.dynamics.variants import simulate_fit  # noqa: PLC0415
 
     start = time.perf_counter()
     kin = _truth_fit(obs, context, "dynamics-truth")
-    kin_s = time.perf_counter() - start
-    body = build_body(kin.shape)
-    phys = optimize_dynamics(body, kin, obs, seeded(PRESETS["fast"], context), progress=False)
-    recon = kin.to_reconstruction(obs, body_mjcf=body.xml)
-    meta = dict(recon.meta, variant="dynamics-truth", dynamics=phys.meta(),
-                timings_s={"kinematics": kin_s, "dynamics": phys.timings["total"]})
-    return recon.replace(**phys.reconstruction_fields(), meta=meta)
+    return simulate_fit(kin, time.perf_counter() - start, obs, context, PRESETS["fast"],
+                        "dynamics-truth")
 
 
 register_variant("truth-ik", truth_ik_variant)

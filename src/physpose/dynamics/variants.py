@@ -29,6 +29,7 @@ from physpose.dynamics.config import ABLATIONS, PRESETS, DynamicsConfig, ablated
 from physpose.dynamics.ilqr import RefineConfig
 from physpose.dynamics.optimize import optimize_dynamics
 from physpose.kinematics.config import KinematicConfig
+from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
 from physpose.reconstruction import Reconstruction
 
@@ -49,13 +50,20 @@ def run_dynamics_variant(obs: Observations, context: VariantContext, kinematic_v
     start = time.perf_counter()
     kin = fit_kinematics(obs, KinematicConfig.preset(kinematic_variant),
                          camera_K=context.camera_K, height=context.person_height)
-    kin_s = time.perf_counter() - start
+    return simulate_fit(kin, time.perf_counter() - start, obs, context, config, name,
+                        body_config)
+
+
+def simulate_fit(kin: KinematicFit, kinematics_s: float, obs: Observations,
+                 context: VariantContext, config: DynamicsConfig, name: str,
+                 body_config: BodyConfig = BodyConfig()) -> Reconstruction:
+    """Dynamics on a kinematic fit that took kinematics_s seconds (the benchmark's ``--seed``
+    offsetting the CMA-ES seed); both fields in the reconstruction, meta naming the variant."""
     body = build_body(kin.shape, config=body_config)
     phys = optimize_dynamics(body, kin, obs, seeded(config, context), progress=False)
     recon = kin.to_reconstruction(obs, body_mjcf=body.xml)
-    meta = dict(recon.meta)
-    meta.update(variant=name, timings_s={"kinematics": kin_s, "dynamics": phys.timings["total"]},
-                dynamics=phys.meta())
+    meta = dict(recon.meta, variant=name, dynamics=phys.meta(),
+                timings_s={"kinematics": kinematics_s, "dynamics": phys.timings["total"]})
     return recon.replace(**phys.reconstruction_fields(), meta=meta)
 
 
