@@ -130,7 +130,6 @@ def test_the_benchmark_seed_reaches_the_search_and_seed_0_changes_nothing(monkey
     monkeypatch.setattr(kinematics_fit, "fit_kinematics", lambda *args, **kwargs: kin)
     monkeypatch.setattr(oracle, "_truth_fit", lambda *args: kin)
     monkeypatch.setattr(dynamics_variants, "optimize_dynamics", optimise)
-    monkeypatch.setattr("physpose.dynamics.optimize.optimize_dynamics", optimise)
     for name in ("dynamics", "dynamics-truth", "dynamics-10ms"):
         for seed in (0, 3):
             with pytest.raises(Stop):
