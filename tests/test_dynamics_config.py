@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import pytest
 
 from physpose.dynamics import ABLATIONS, PRESETS, DynamicsConfig, ablated
+from physpose.dynamics.config import REFINE_COUNTERPARTS
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.dynamics.variants import (EVERY_ATTEMPT, FULL_OBJECTIVE, NO_HOPELESS_RETRY,
                                         SEARCH_ONLY)
@@ -47,6 +48,23 @@ def test_presets_and_ablations():
         DynamicsConfig(search="arms")
     with pytest.raises(PhysposeError):
         DynamicsConfig(candidates=0)
+
+
+def test_ablating_the_refined_default_removes_the_refinements_counterparts():
+    fast = PRESETS["fast"]
+    no2d = ablated(fast, "no2d")
+    assert no2d.weights.reprojection == 0 and no2d.refine.image == 0
+    assert no2d.refine.hinge == fast.refine.hinge and no2d.refine.iterations == 6
+    no3d = ablated(fast, "no3d")
+    assert no3d.refine.hinge == no3d.refine.root_orientation == no3d.refine.hinge_velocity == 0
+    assert no3d.refine.image == fast.refine.image and no3d.refine.root_position > 0
+    nocom = ablated(fast, "nocom")
+    assert nocom.refine.root_position == nocom.refine.root_velocity == 0
+    assert nocom.refine.hinge == fast.refine.hinge
+    # The prior has no counterpart; the search alone keeps its (switched off) refinement as is.
+    assert ablated(fast, "noprior").refine == fast.refine
+    assert ablated(FULL_OBJECTIVE, "no2d").refine == FULL_OBJECTIVE.refine
+    assert set(REFINE_COUNTERPARTS) == {t for terms in ABLATIONS.values() for t in terms}
 
 
 def test_window_identity_leaves_out_what_does_not_change_the_windows():

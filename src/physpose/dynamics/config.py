@@ -245,11 +245,29 @@ ABLATIONS: dict[str, tuple[str, ...]] = {
     "no2d": ("reprojection",), "no3d": ("pose",), "nocom": ("com",),
     "nocompose": ("com", "pose"), "noprior": ("prior",),
 }
+# What the iLQR refinement's tracking cost asks for in the same role as each objective term,
+# removed with it: the detections (the image term; the root held in depth needs its camera),
+# the pose (root orientation and hinge angles, and the hinges' speeds) and the centre of mass
+# (the root's place and velocity, which carry the body's mass). The prior has no counterpart.
+REFINE_COUNTERPARTS: dict[str, tuple[str, ...]] = {
+    "reprojection": ("image", "root_depth"),
+    "pose": ("root_orientation", "hinge", "hinge_velocity"),
+    "com": ("root_position", "root_velocity", "root_depth"),
+    "prior": (),
+}
 
 
 def ablated(config: DynamicsConfig, name: str) -> DynamicsConfig:
-    """The config with the terms of ablation ``name`` (ABLATIONS) switched off."""
+    """The config with the terms of ablation ``name`` (ABLATIONS) switched off, in the search's
+    objective and, where the refinement is on, their counterparts in its tracking cost
+    (REFINE_COUNTERPARTS): without them a refined ``no2d`` would still be pulled onto the
+    detections."""
     if name not in ABLATIONS:
         raise PhysposeError(f"unknown ablation {name!r}", remedy=f"use one of {list(ABLATIONS)}")
-    weights = dataclasses.replace(config.weights, **{t: 0.0 for t in ABLATIONS[name]})
-    return dataclasses.replace(config, weights=weights)
+    terms = ABLATIONS[name]
+    weights = dataclasses.replace(config.weights, **{t: 0.0 for t in terms})
+    refine = config.refine
+    if refine.enabled:
+        refine = dataclasses.replace(refine, **{w: 0.0 for t in terms
+                                                for w in REFINE_COUNTERPARTS[t]})
+    return dataclasses.replace(config, weights=weights, refine=refine)

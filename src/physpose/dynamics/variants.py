@@ -5,7 +5,9 @@ trajectory optimisation with the default preset); ``dynamics-so``: on the SO kin
 ``dynamics-full``: the default preset with the paper's objective terms and weights (the
 default has no COM term and adds the swing term); ``dynamics-<ablation>`` (no2d, no3d, nocom,
 nocompose, noprior): the bottom half of the paper's Table 2, that full model with objective
-terms removed. ``dynamics-10ms``: the default preset on 10 ms simulation steps instead of 5 ms
+terms removed (the search alone, as before stop 37); ``dynamics-default-<ablation>``: the
+default preset with the same terms removed from the search and from its refinement, and
+``dynamics-default-com``: the default with the paper's COM term added. ``dynamics-10ms``: the default preset on 10 ms simulation steps instead of 5 ms
 (stop 43, not kept). ``dynamics-search``, ``dynamics-refine-every``, ``dynamics-refine-noimage``,
 ``dynamics-ilqr`` and ``dynamics-ilqr-image``: the search alone (no iLQR refinement), the
 default of stop 40 (two retries, every attempt of a window refined), the refinement as it was
@@ -90,6 +92,17 @@ register_variant("dynamics-full", _variant("SO+GT", FULL_OBJECTIVE, "dynamics-fu
 for _ablation in ABLATIONS:
     _name = f"dynamics-{_ablation}"
     register_variant(_name, _variant("SO+GT", ablated(FULL_OBJECTIVE, _ablation), _name))
+
+# The same table on the default preset, refinement on (stop 45): each ablation removes the
+# search's terms and their counterparts in the refinement's tracking cost
+# (config.REFINE_COUNTERPARTS); ``dynamics-default-com`` adds the paper's COM term (weight 15),
+# which the default leaves out, so that it and the ablations bracket the default.
+for _ablation in ABLATIONS:
+    _name = f"dynamics-default-{_ablation}"
+    register_variant(_name, _variant("SO+GT", ablated(PRESETS["fast"], _ablation), _name))
+WITH_COM = dataclasses.replace(PRESETS["fast"], weights=dataclasses.replace(
+    PRESETS["fast"].weights, com=ObjectiveWeights().com))
+register_variant("dynamics-default-com", _variant("SO+GT", WITH_COM, "dynamics-default-com"))
 
 # The fast preset of stop 40: two retries, every attempt of a window refined (not only those
 # that could come within the retry distance, and the kept one).
