@@ -26,7 +26,7 @@ def test_presets_and_ablations():
     assert PRESETS["fast"].weights.com == 0.0 and PRESETS["fast"].weights.pose == 0.5
     assert PRESETS["fast"].weights.swing > 0
     # The fast preset refines each window by iLQR after its search; the paper's has no
-    # refinement, nor do the ablations (which remove terms of the search's objective).
+    # refinement, nor do the search-alone ablations of the paper's full objective.
     assert PRESETS["fast"].refine.enabled and not PRESETS["paper"].refine.enabled
     # Since stop 40 the fast preset's refinement also pulls the landmarks onto the detections.
     assert PRESETS["fast"].refine.image > 0

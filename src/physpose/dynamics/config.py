@@ -248,7 +248,7 @@ ABLATIONS: dict[str, tuple[str, ...]] = {
 # What the iLQR refinement's tracking cost asks for in the same role as each objective term,
 # removed with it: the detections (the image term; the root held in depth needs its camera),
 # the pose (root orientation and hinge angles, and the hinges' speeds) and the centre of mass
-# (the root's place and velocity, which carry the body's mass). The prior has no counterpart.
+# (the root's place and velocity, which move the body's mass). The prior has no counterpart.
 REFINE_COUNTERPARTS: dict[str, tuple[str, ...]] = {
     "reprojection": ("image", "root_depth"),
     "pose": ("root_orientation", "hinge", "hinge_velocity"),

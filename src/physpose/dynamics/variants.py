@@ -7,9 +7,10 @@ default has no COM term and adds the swing term); ``dynamics-<ablation>`` (no2d,
 nocompose, noprior): the bottom half of the paper's Table 2, that full model with objective
 terms removed (the search alone, as before stop 37); ``dynamics-default-<ablation>``: the
 default preset with the same terms removed from the search and from its refinement, and
-``dynamics-default-com``: the default with the paper's COM term added. ``dynamics-10ms``: the default preset on 10 ms simulation steps instead of 5 ms
-(stop 43, not kept). ``dynamics-search``, ``dynamics-refine-every``, ``dynamics-refine-noimage``,
-``dynamics-ilqr`` and ``dynamics-ilqr-image``: the search alone (no iLQR refinement), the
+``dynamics-default-com``: the default with the paper's COM term added. ``dynamics-10ms``: the
+default preset on 10 ms simulation steps instead of 5 ms (stop 43, not kept).
+``dynamics-search``, ``dynamics-refine-every``, ``dynamics-refine-noimage``, ``dynamics-ilqr``
+and ``dynamics-ilqr-image``: the search alone (no iLQR refinement), the
 default of stop 40 (two retries, every attempt of a window refined), the refinement as it was
 before stop 40 (no image term), and iLQR instead of the search; all with two retries, as
 measured before stop 41. ``dynamics-no-hopeless-retry``: the default without a retry after a
