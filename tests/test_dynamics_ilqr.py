@@ -8,6 +8,7 @@ import pytest
 
 from physpose.body import build_body, standing_qpos
 from physpose.dynamics.config import PRESETS, DynamicsConfig
+from physpose.dynamics import ilqr
 from physpose.dynamics.ilqr import RefineConfig, refine_targets
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
 from physpose.dynamics.synthetic import motion_targets
@@ -65,6 +66,29 @@ def test_zero_iterations_return_the_start(stepping):
                              truth[:, 1 + NQ:1 + NQ + NV], RefineConfig(iterations=0))
     np.testing.assert_array_equal(refined.ctrl, targets)
     assert refined.costs == [pytest.approx(0.0, abs=1e-9)]
+
+
+def test_a_rejected_step_keeps_its_linearisation(stepping, monkeypatch):
+    """A rejected step leaves the trajectory where it was, so the next iteration reuses its
+    transition Jacobians: they are taken once per trajectory the refinement reaches."""
+    sim, state0, targets, truth = stepping
+    linearised = []
+    original = ilqr._Problem.linearise
+
+    def counting(self, states, *args):
+        linearised.append(states.copy())
+        return original(self, states, *args)
+
+    monkeypatch.setattr(ilqr._Problem, "linearise", counting)
+    # Hardly damped, the first steps overshoot and are rejected (costs 511, 511, ... 299).
+    refined = refine_targets(sim.model, state0, targets + 0.03, truth[:, 1:1 + NQ],
+                             truth[:, 1 + NQ:1 + NQ + NV],
+                             RefineConfig(iterations=6, regularisation=1e-3))
+    accepted = sum(b < a for a, b in zip(refined.costs, refined.costs[1:]))
+    assert 0 < accepted < 6
+    assert len(linearised) <= accepted + 1
+    for a, b in zip(linearised, linearised[1:]):
+        assert not np.array_equal(a, b)
 
 
 @pytest.mark.parametrize("changes", [{"iterations": -1}, {"derivative_stride": 0},

@@ -422,12 +422,17 @@ def _iterate(problem: _Problem, cfg: RefineConfig, pool: ThreadPoolExecutor | No
     states, applied = problem.rollout(problem.u_start)
     cost = problem.cost(states, applied)
     costs, mu = [cost], cfg.regularisation
+    # A rejected step leaves the trajectory where it was, and with it its linearisation: only
+    # the damping changes, so the Jacobians (most of an iteration's time) are kept.
+    linearised = None
     # The recursion's matrices are small (108 x 108): BLAS threads only cost time there.
     with threadpool_limits(limits=1, user_api="blas"):
         for _ in range(cfg.iterations):
             if not np.isfinite(cost):
                 break
-            As, Bs = problem.linearise(states, applied, pool, nthread)
+            if linearised is None:
+                linearised = problem.linearise(states, applied, pool, nthread)
+            As, Bs = linearised
             solved = None
             while solved is None and mu < _MAX_REGULARISATION:
                 solved = problem.gains(states, applied, As, Bs, mu)
@@ -441,6 +446,7 @@ def _iterate(problem: _Problem, cfg: RefineConfig, pool: ThreadPoolExecutor | No
                 new_cost = problem.cost(new_states, new_applied)
                 if new_cost < cost:
                     states, applied, cost, accepted = new_states, new_applied, new_cost, True
+                    linearised = None
                     break
             mu = max(mu / 3.0, 1e-6) if accepted else mu * 10.0
             costs.append(cost)
