@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from physpose.body import build_body, standing_qpos
-from physpose.dynamics.config import PRESETS, DynamicsConfig
 from physpose.dynamics import ilqr
+from physpose.dynamics.config import PRESETS, DynamicsConfig
 from physpose.dynamics.ilqr import RefineConfig, refine_targets
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
 from physpose.dynamics.synthetic import motion_targets
@@ -80,7 +80,8 @@ def test_a_rejected_step_keeps_its_linearisation(stepping, monkeypatch):
         return original(self, states, *args)
 
     monkeypatch.setattr(ilqr._Problem, "linearise", counting)
-    # Hardly damped, the first steps overshoot and are rejected (costs 511, 511, ... 299).
+    # Hardly damped, the first steps overshoot and are rejected (here the cost stays at its
+    # start for four iterations).
     refined = refine_targets(sim.model, state0, targets + 0.03, truth[:, 1:1 + NQ],
                              truth[:, 1 + NQ:1 + NQ + NV],
                              RefineConfig(iterations=6, regularisation=1e-3))

@@ -8,7 +8,7 @@ simulation step, by iterative LQR (Li and Todorov 2004; Tassa, Erez and Todorov 
 1. linearise the simulation along the current trajectory: MuJoCo's finite-difference
    transition Jacobians (``mjd_transitionFD``, x' = A x + B u in the tangent space of
    positions and velocities), contacts included, taken every ``derivative_stride`` steps and
-   held in between;
+   held in between (and kept for the next iteration when a step is rejected);
 2. solve the LQR problem of a quadratic tracking cost backwards in time (Riccati recursion),
    with the control Hessian damped by ``regularisation`` (Levenberg-Marquardt: raised tenfold
    after a rejected step, lowered after an accepted one);
