@@ -70,16 +70,22 @@ def test_zero_iterations_return_the_start(stepping):
 
 def test_a_rejected_step_keeps_its_linearisation(stepping, monkeypatch):
     """A rejected step leaves the trajectory where it was, so the next iteration reuses its
-    transition Jacobians: they are taken once per trajectory the refinement reaches."""
+    transition Jacobians and cost expansion: they are taken once per trajectory the
+    refinement reaches."""
     sim, state0, targets, truth = stepping
-    linearised = []
-    original = ilqr._Problem.linearise
+    linearised, expanded = [], []
+    linearise, expand = ilqr._Problem.linearise, ilqr._Problem.cost_expansion
 
     def counting(self, states, *args):
         linearised.append(states.copy())
-        return original(self, states, *args)
+        return linearise(self, states, *args)
+
+    def counting_expansions(self, states):
+        expanded.append(states.copy())
+        return expand(self, states)
 
     monkeypatch.setattr(ilqr._Problem, "linearise", counting)
+    monkeypatch.setattr(ilqr._Problem, "cost_expansion", counting_expansions)
     # Hardly damped, the first steps overshoot and are rejected (here the cost stays at its
     # start for four iterations).
     refined = refine_targets(sim.model, state0, targets + 0.03, truth[:, 1:1 + NQ],
@@ -88,6 +94,7 @@ def test_a_rejected_step_keeps_its_linearisation(stepping, monkeypatch):
     accepted = sum(b < a for a, b in zip(refined.costs, refined.costs[1:]))
     assert 0 < accepted < 6
     assert len(linearised) <= accepted + 1
+    assert len(expanded) == len(linearised)
     for a, b in zip(linearised, linearised[1:]):
         assert not np.array_equal(a, b)
 

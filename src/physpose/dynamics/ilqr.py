@@ -335,11 +335,11 @@ class _Problem:
             list(pool.map(work, range(parts), [parts] * parts))
         return As, Bs
 
-    def gains(self, states: np.ndarray, ctrl: np.ndarray, As: np.ndarray, Bs: np.ndarray,
-              mu: float) -> tuple[np.ndarray, np.ndarray] | None:
-        """Riccati recursion: feedforward k (n, 48) and feedback K (n, 48, 2nv), or None
-        where the damped control Hessian is not positive definite."""
-        n, nx, nv = len(ctrl), 2 * self.nv, self.nv
+    def cost_expansion(self, states: np.ndarray) -> tuple[np.ndarray, dict, dict]:
+        """The state cost's gradient lx (n+1, 2nv) along a trajectory, with the Gauss-Newton
+        Hessian blocks of the standing feet's slide ({t: (nv, nv)}, on the velocities) and of
+        the image and depth terms ({t: (gradient, (nv, nv))}, on the positions)."""
+        nv = self.nv
         lx = self.lxx * self.deviation(states, self.ref_qpos, self.ref_qvel)
         # Standing feet's horizontal speed (Gauss-Newton in the velocities).
         slide_h = {}
@@ -351,6 +351,16 @@ class _Problem:
         image = self.position_terms(states)
         for t, (g, _) in image.items():
             lx[t, :nv] += g
+        return lx, slide_h, image
+
+    def gains(self, ctrl: np.ndarray, As: np.ndarray, Bs: np.ndarray,
+              expansion: tuple[np.ndarray, dict, dict], mu: float
+              ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Riccati recursion on the linearisation As, Bs and the ``cost_expansion`` of the
+        trajectory ctrl drove: feedforward k (n, 48) and feedback K (n, 48, 2nv), or None
+        where the damped control Hessian is not positive definite."""
+        n, nx, nv = len(ctrl), 2 * self.nv, self.nv
+        lx, slide_h, image = expansion  # read only, so a kept expansion serves again
         lu = self.cfg.control * (ctrl - self.u_start)
         ruu = (self.cfg.control + mu) * np.eye(NUM_DOF)
         ks, Ks = np.empty((n, NUM_DOF)), np.empty((n, NUM_DOF, nx))
@@ -422,8 +432,9 @@ def _iterate(problem: _Problem, cfg: RefineConfig, pool: ThreadPoolExecutor | No
     states, applied = problem.rollout(problem.u_start)
     cost = problem.cost(states, applied)
     costs, mu = [cost], cfg.regularisation
-    # A rejected step leaves the trajectory where it was, and with it its linearisation: only
-    # the damping changes, so the Jacobians (most of an iteration's time) are kept.
+    # A rejected step leaves the trajectory where it was, and with it its quadratic model (the
+    # Jacobians, most of an iteration's time, and the cost's expansion): only the damping
+    # changes, so the model is kept until a step is accepted.
     linearised = None
     # The recursion's matrices are small (108 x 108): BLAS threads only cost time there.
     with threadpool_limits(limits=1, user_api="blas"):
@@ -431,11 +442,12 @@ def _iterate(problem: _Problem, cfg: RefineConfig, pool: ThreadPoolExecutor | No
             if not np.isfinite(cost):
                 break
             if linearised is None:
-                linearised = problem.linearise(states, applied, pool, nthread)
-            As, Bs = linearised
+                linearised = (*problem.linearise(states, applied, pool, nthread),
+                              problem.cost_expansion(states))
+            As, Bs, expansion = linearised
             solved = None
             while solved is None and mu < _MAX_REGULARISATION:
-                solved = problem.gains(states, applied, As, Bs, mu)
+                solved = problem.gains(applied, As, Bs, expansion, mu)
                 if solved is None:
                     mu *= 10.0
             if solved is None:
