@@ -13,7 +13,8 @@ from physpose.dynamics import TERMS, DynamicsConfig, optimize_dynamics
 from physpose.dynamics import checkpoint
 from physpose.dynamics.balance import BalanceGains
 from physpose.dynamics.ilqr import RefineConfig
-from physpose.dynamics.optimize import _cma, _window_seed, searched_dofs
+from physpose.dynamics.optimize import searched_dofs
+from physpose.dynamics.search import cma_strategy, window_seed
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.dynamics.windows import blend_weights, plan_windows
 from physpose.errors import PhysposeError
@@ -67,7 +68,7 @@ def test_same_seed_same_result_and_another_seed_differs(clip):
     np.testing.assert_array_equal(a.qpos, b.qpos)
     # Every window draws its own reproducible samples from (seed, window index).
     x0 = np.zeros(10)
-    draw = lambda seed, w: np.array(_cma(x0, TINY, _window_seed(seed, w)).ask())  # noqa: E731
+    draw = lambda seed, w: np.array(cma_strategy(x0, TINY, window_seed(seed, w)).ask())  # noqa: E731
     np.testing.assert_array_equal(draw(0, 1), draw(0, 1))
     assert not np.array_equal(draw(0, 1), draw(0, 2))
     assert not np.array_equal(draw(0, 1), draw(7, 1))

@@ -22,11 +22,9 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
-import cma
 import mujoco
 import numpy as np
 from tqdm import tqdm
@@ -39,6 +37,7 @@ from physpose.dynamics.init import (Reference, geom_lowest, ground_motion, groun
                                     smooth_reference)
 from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, make_reference)
 from physpose.dynamics.result import PhysicsResult, mean_window_loss
+from physpose.dynamics.search import Best, search_averaged, window_seed
 from physpose.dynamics.rollout import SimModel, Simulator, Trajectories, make_state, sim_model
 from physpose.dynamics.spline import KnotGrid
 from physpose.dynamics.stance import flatten_stance_feet
@@ -48,7 +47,7 @@ from physpose.dynamics.balance import balance_plan
 from physpose.dynamics.controller import track_reference
 from physpose.dynamics.ilqr import ImageTerm, refine_targets
 from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
-                                       ranked_fitness, score, step_position, window_over)
+                                       score, step_position, window_over)
 from physpose.errors import PhysposeError
 from physpose.reconstruction import restart_frames
 from physpose.kinematics.result import KinematicFit
@@ -160,184 +159,7 @@ def _problem(setup: _Setup, win: Window, coefs: np.ndarray, state0: np.ndarray,
     return dataclasses.replace(problem, alternatives=(tracked,))
 
 
-def _cma(x0: np.ndarray, cfg: DynamicsConfig, seed: int) -> cma.CMAEvolutionStrategy:
-    opts = {"seed": seed, "popsize": cfg.popsize, "CMA_diagonal": bool(cfg.diagonal),
-            "verbose": -9, "verb_log": 0, "verb_disp": 0, "maxiter": max(cfg.iterations, 1),
-            "tolfun": 0.0, "tolx": 0.0, "tolfunhist": 0.0, "tolflatfitness": 10 ** 9,
-            "tolstagnation": 10 ** 9}
-    return cma.CMAEvolutionStrategy(x0.ravel(), cfg.sigma0, opts)
-
-
-def _window_seed(seed: int, index: int) -> int:
-    """CMA-ES seed of a window (pycma treats 0 as 'from the clock', so never 0)."""
-    return (seed * 1_000_003 + index) % (2 ** 31 - 1) + 1
-
-
-@dataclass
-class _Best:
-    x: np.ndarray
-    loss: float       # objective (+inf when the sample left the valid state space)
-    fitness: float    # ranked fitness (finite)
-    valid: bool
-    terms: dict
-    states: np.ndarray
-    sensors: np.ndarray
-    ctrl: np.ndarray  # (S, 48) servo targets applied, balance feedback included
-
-
-def _slice(traj: Trajectories, rows: slice, steps: int) -> Trajectories:
-    return Trajectories(states=traj.states[rows, :steps + 1], sensors=traj.sensors[rows, :steps + 1],
-                        broken=traj.broken[rows, :steps + 1], ctrl=traj.ctrl[rows, :steps])
-
-
-class _Search:
-    """CMA-ES on a group of window problems in lockstep, sharing batched rollouts."""
-
-    def __init__(self, problems: list[WindowProblem], simulator: Simulator, setup: _Setup,
-                 cfg: DynamicsConfig, timing: dict):
-        self.problems, self.simulator, self.setup, self.cfg = problems, simulator, setup, cfg
-        self.timing = timing
-        self.evaluations = [0] * len(problems)
-
-    def _evaluate(self, problems: list[WindowProblem], xs: list[np.ndarray]) -> list[tuple]:
-        """(scores, trajectories) of the samples xs[i] (B_i, n) of problems[i], one rollout."""
-        t0 = time.perf_counter()
-        ctrls = [p.ctrl(x) for p, x in zip(problems, xs)]
-        longest = max(c.shape[1] for c in ctrls)
-        ctrl = np.concatenate([np.concatenate([c, np.repeat(c[:, -1:], longest - c.shape[1], 1)],
-                                              axis=1) for c in ctrls])
-        state0 = np.concatenate([np.repeat(p.state0[None], len(x), 0)
-                                 for p, x in zip(problems, xs)])
-        ends = np.cumsum([len(x) for x in xs])
-        rows = [slice(int(e) - len(x), int(e)) for e, x in zip(ends, xs)]  # each problem's
-        feedback = [(r, p.balance) for p, r in zip(problems, rows) if p.balance is not None]
-        traj = self.simulator.run(state0, ctrl, feedback)
-        t1 = time.perf_counter()
-        out = []
-        for p, r in zip(problems, rows):
-            part = _slice(traj, r, p.window.num_steps)
-            scores, _ = score(p, part, self.setup.objective, self.cfg.weights,
-                              self.cfg.max_root_distance, self.cfg.max_penetration)
-            out.append((scores, part))
-        self.timing["rollout"] = self.timing.get("rollout", 0.0) + t1 - t0
-        self.timing["objective"] = self.timing.get("objective", 0.0) + time.perf_counter() - t1
-        return out
-
-    @staticmethod
-    def _update(best: _Best | None, x: np.ndarray, scores, part: Trajectories,
-                fitness: np.ndarray) -> _Best:
-        """Keep the lowest ranked fitness seen (valid samples before invalid ones)."""
-        k = int(np.argmin(fitness))
-        if best is not None and fitness[k] >= best.fitness:
-            return best
-        return _Best(x=np.array(x[k]), loss=float(scores.total[k]), fitness=float(fitness[k]),
-                     valid=bool(np.isfinite(scores.total[k])),
-                     terms={n: float(v[k]) for n, v in scores.terms.items()},
-                     states=part.states[k].copy(), sensors=part.sensors[k].copy(),
-                     ctrl=part.ctrl[k].copy())
-
-    def run(self, seeds: list[int], label: str, progress: bool, force_start: int | None = None
-            ) -> tuple[list[_Best], list[dict]]:
-        """Search every problem; returns the best sample of each and its initial record.
-
-        The search starts from the best-scoring start guess, or from start ``force_start``
-        (0: the problem's own, k: its k-th alternative) where a problem has it.
-
-        Each iteration also rolls out every strategy's current mean (not told to CMA-ES):
-        the mean is the smoothest candidate and often the best.
-        """
-        frames = [len(p.positions) for p in self.problems]
-        # Start guesses: each problem's own start and its alternative start controls, one
-        # rollout each; the search goes on from the best (its problem replaces the original).
-        groups = [[p] + [p.starting_from(a) for a in p.alternatives] for p in self.problems]
-        flat = [c for g in groups for c in g]
-        evaluated = self._evaluate(flat, [c.x0.reshape(1, -1) for c in flat])
-        best: list[_Best | None] = [None] * len(self.problems)
-        initial, row = [], 0
-        for i, group in enumerate(groups):
-            fitness = np.array([ranked_fitness(s, frames[i])[0] for s, _ in
-                                evaluated[row:row + len(group)]])
-            k = int(np.argmin(fitness))
-            if force_start is not None and force_start < len(group):
-                k = force_start
-            s, part = evaluated[row + k]
-            self.problems[i] = group[k]
-            self.evaluations[i] = len(group)
-            best[i] = self._update(None, group[k].x0.reshape(1, -1), s, part, fitness[k:k + 1])
-            s0 = evaluated[row][0]
-            initial.append({"loss": float(s0.total[0]), "valid": bool(np.isfinite(s0.total[0])),
-                            "terms": {n: float(v[0]) for n, v in s0.terms.items()}, "start": k})
-            row += len(group)
-        strategies = [_cma(b.x, self.cfg, seed) for b, seed in zip(best, seeds)]
-        bar = tqdm(total=self.cfg.iterations, desc=label, disable=not progress, file=sys.stderr,
-                   leave=False, dynamic_ncols=True)
-        with warnings.catch_warnings():
-            # sep-CMA's diagonal update warns about >7.4 sigma steps, which the ranked
-            # penalties of failed samples can cause; the update itself is bounded.
-            warnings.filterwarnings("ignore", message="elements of z2", category=UserWarning)
-            for _ in range(self.cfg.iterations):
-                xs = [np.vstack([np.array(es.ask()), es.mean[None]]) for es in strategies]
-                evaluated = self._evaluate(self.problems, xs)
-                for i, (es, x, (scores, part)) in enumerate(zip(strategies, xs, evaluated)):
-                    self.evaluations[i] += len(x)
-                    fitness = ranked_fitness(scores, frames[i])
-                    es.tell(list(x[:-1]), fitness[:-1].tolist())
-                    best[i] = self._update(best[i], x, scores, part, fitness)
-                bar.update(1)
-                bar.set_postfix(loss=" ".join(f"{b.loss:.3g}" for b in best))
-        bar.close()
-        return best, initial
-
-
-def _copy_seed(seed: int, copy: int) -> int:
-    """CMA-ES seed of the copy-th side-by-side search of a window (copy 0 keeps ``seed``)."""
-    return seed if copy == 0 else (seed + 104_729 * copy) % (2 ** 31 - 1) + 1
-
-
-def _search_averaged(problems: list[WindowProblem], simulator: Simulator, setup: _Setup,
-                     cfg: DynamicsConfig, timing: dict, seeds: list[int], label: str,
-                     progress: bool, force_start: int | None = None
-                     ) -> tuple[list[WindowProblem], list[_Best], list[dict], list[int]]:
-    """Search every problem ``cfg.searches`` times side by side (other seeds, shared rollouts)
-    and keep the average of the searches' results where it is valid and no worse than the
-    worst of them, else the best search's. Returns, per problem: the problem as searched (its
-    chosen start), the kept result, its initial record (``kept``: "average" or "search k")
-    and the number of evaluations.
-
-    Why: the searches' offsets from their common start are nearly uncorrelated (0.13 on
-    motion-capture windows, docs/dynamics.md, Averaged searches): most of each is CMA-ES's
-    random walk in directions the loss hardly sees, which the average cancels while it keeps
-    the correction they share."""
-    n = cfg.searches
-    copies = [p for p in problems for _ in range(n)]
-    search = _Search(copies, simulator, setup, cfg, timing)
-    bests, initials = search.run([_copy_seed(s, c) for s in seeds for c in range(n)], label,
-                                 progress, force_start=force_start)
-    out: tuple[list, list, list, list] = ([], [], [], [])
-    for i in range(len(problems)):
-        rows = list(range(i * n, (i + 1) * n))
-        evaluations = sum(search.evaluations[r] for r in rows)
-        # Offsets add to a start guess: only searches from the same start can be averaged.
-        same = [r for r in rows if initials[r]["start"] == initials[rows[0]]["start"]]
-        kept, label_kept = min(rows, key=lambda r: bests[r].fitness), None
-        best = bests[kept]
-        if len(same) > 1:
-            x = np.mean([bests[r].x for r in same], axis=0)[None]
-            ((scores, part),) = search._evaluate([search.problems[rows[0]]], [x])
-            frames = len(search.problems[rows[0]].positions)
-            average = _Search._update(None, x, scores, part, ranked_fitness(scores, frames))
-            evaluations += 1
-            if average.valid and average.loss <= max(bests[r].loss for r in same):
-                kept, best, label_kept = same[0], average, "average"
-        out[0].append(search.problems[kept])
-        out[1].append(best)
-        out[2].append(dict(initials[rows[0]], kept=label_kept or f"search {kept - rows[0]}",
-                           search_losses=[bests[r].loss for r in rows]))
-        out[3].append(evaluations)
-    return out
-
-
-def _frame_outputs(setup: _Setup, b: _Best, win: Window, frames: np.ndarray) -> dict:
+def _frame_outputs(setup: _Setup, b: Best, win: Window, frames: np.ndarray) -> dict:
     traj = Trajectories(states=b.states[None], sensors=b.sensors[None],
                         broken=np.zeros((1, len(b.states)), dtype=bool))
     pos = step_position(frames, setup.objective.fps, setup.sim.dt) - win.start_step
@@ -345,7 +167,7 @@ def _frame_outputs(setup: _Setup, b: _Best, win: Window, frames: np.ndarray) -> 
     return {"qpos": s.qpos[0], "joints": s.joints[0], "landmarks": s.landmarks[0], "com": s.com[0]}
 
 
-def _record(win: Window, best: _Best, initial: dict, evaluations: int, seconds: float,
+def _record(win: Window, best: Best, initial: dict, evaluations: int, seconds: float,
             weights: ObjectiveWeights) -> dict:
     return {"index": win.index, "frames": [win.first, win.last],
             "steps": [win.start_step, win.end_step], "evaluations": evaluations,
@@ -362,7 +184,7 @@ def _record(win: Window, best: _Best, initial: dict, evaluations: int, seconds: 
 _OUTPUT_KEYS = ("qpos", "joints", "landmarks", "com")
 
 
-def _handover_error(setup: _Setup, best: _Best, win: Window, step_end: int) -> float:
+def _handover_error(setup: _Setup, best: Best, win: Window, step_end: int) -> float:
     """Distance (m) between the simulated and the kinematic COM where the next window starts
     (infinite for an invalid result)."""
     if not best.valid:
@@ -372,8 +194,8 @@ def _handover_error(setup: _Setup, best: _Best, win: Window, step_end: int) -> f
     return float(np.linalg.norm(com - setup.objective.com[min(frame, len(setup.objective.com) - 1)]))
 
 
-def _refine(setup: _Setup, problem: WindowProblem, best: _Best, initial: dict,
-            simulator: Simulator, cfg: DynamicsConfig, timing: dict) -> tuple[_Best, dict]:
+def _refine(setup: _Setup, problem: WindowProblem, best: Best, initial: dict,
+            simulator: Simulator, cfg: DynamicsConfig, timing: dict) -> tuple[Best, dict]:
     """The search's result refined by iLQR (ilqr.py) towards the reference; kept when it is
     valid and its objective is at most ``keep_ratio`` times the search's (the objective and the
     refinement's tracking cost differ, so a small rise is allowed). The record gets
@@ -407,7 +229,7 @@ def _refine(setup: _Setup, problem: WindowProblem, best: _Best, initial: dict,
     initial = dict(initial, refine=record)
     if not keep:
         return best, initial
-    return _Best(x=best.x, loss=loss, fitness=loss, valid=True,
+    return Best(x=best.x, loss=loss, fitness=loss, valid=True,
                  terms={n: float(v[0]) for n, v in scores.terms.items()},
                  states=traj.states[0].copy(), sensors=traj.sensors[0].copy(),
                  ctrl=traj.ctrl[0].copy()), initial
@@ -419,7 +241,7 @@ def _finite_or_none(value: float) -> float | None:
 
 def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _Setup,
                          cfg: DynamicsConfig, timing: dict, w: int, step_end: int, label: str,
-                         progress: bool) -> tuple[WindowProblem, _Best, dict, int]:
+                         progress: bool) -> tuple[WindowProblem, Best, dict, int]:
     """Search a window; while its best sample hands the next window a state whose COM is more
     than ``retry_distance`` from the estimate's (a fall in the making) or is invalid, search
     again with another seed and a larger step size, up to ``retries`` times. Keeps the attempt
@@ -441,9 +263,9 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
         # The first retry of a window with two start guesses goes on from the other one: the
         # better-scoring start can still be the one heading for a fall.
         force = 1 - first_start if attempt == 1 and problem.alternatives else None
-        (searched,), (best,), (initial,), (count,) = _search_averaged(
-            [problem], simulator, setup, attempt_cfg, timing,
-            [_window_seed(cfg.seed + 7919 * attempt, w)],
+        (searched,), (best,), (initial,), (count,) = search_averaged(
+            [problem], simulator, setup.objective, attempt_cfg, timing,
+            [window_seed(cfg.seed + 7919 * attempt, w)],
             label + (f" retry {attempt}" if attempt else ""), progress, force_start=force)
         if attempt == 0:
             first_start = initial["start"]
@@ -472,9 +294,9 @@ def _search_with_retries(problem: WindowProblem, simulator: Simulator, setup: _S
     return searched, best, initial, evaluations
 
 
-def _refine_logged(setup: _Setup, searched: WindowProblem, best: _Best, initial: dict,
+def _refine_logged(setup: _Setup, searched: WindowProblem, best: Best, initial: dict,
                    simulator: Simulator, cfg: DynamicsConfig, timing: dict, step_end: int,
-                   log: dict) -> tuple[_Best, dict, float]:
+                   log: dict) -> tuple[Best, dict, float]:
     """_refine, then the handover error of its result, both noted in an attempt's ``log``."""
     best, initial = _refine(setup, searched, best, initial, simulator, cfg, timing)
     error = _handover_error(setup, best, searched.window, step_end)
@@ -582,9 +404,9 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
                              _kinematic_state(setup, wins[w].start_step, cfg.ground_snap), 0, None,
                              cfg) for w in group]
         label = f"dynamics windows {group[0] + 1}-{group[-1] + 1}/{len(wins)}"
-        searched, bests, initials, counts = _search_averaged(
-            problems, simulator, setup, cfg, timing, [_window_seed(cfg.seed, w) for w in group],
-            label, progress)
+        searched, bests, initials, counts = search_averaged(
+            problems, simulator, setup.objective, cfg, timing,
+            [window_seed(cfg.seed, w) for w in group], label, progress)
         if cfg.refine.enabled:
             for i in range(len(group)):
                 bests[i], initials[i] = _refine(setup, searched[i], bests[i], initials[i],
