@@ -12,6 +12,9 @@ paper's mode for long clips): every window starts from the kinematic state at it
 searches all its coefficients, and the windows are searched side by side (their samples share
 one batched rollout) and cross-faded where they overlap.
 
+A window's CMA-ES search is search.py's and its iLQR refinement ilqr.py's; this module runs
+the windows: their set-up, retries, cuts and restarts, and the join.
+
 Every finished window is written to a run folder keyed by the inputs and the config, so an
 interrupted run resumes at the first unfinished window. Same inputs, config and seed give the
 same result.
