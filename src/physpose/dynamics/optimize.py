@@ -233,9 +233,9 @@ def _refine(setup: _Setup, problem: WindowProblem, best: Best, initial: dict,
     if not keep:
         return best, initial
     return Best(x=best.x, loss=loss, fitness=loss, valid=True,
-                 terms={n: float(v[0]) for n, v in scores.terms.items()},
-                 states=traj.states[0].copy(), sensors=traj.sensors[0].copy(),
-                 ctrl=traj.ctrl[0].copy()), initial
+                terms={n: float(v[0]) for n, v in scores.terms.items()},
+                states=traj.states[0].copy(), sensors=traj.sensors[0].copy(),
+                ctrl=traj.ctrl[0].copy()), initial
 
 
 def _finite_or_none(value: float) -> float | None:

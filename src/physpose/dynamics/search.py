@@ -69,7 +69,7 @@ class WindowSearch:
         self.timing = timing
         self.evaluations = [0] * len(problems)
 
-    def _evaluate(self, problems: list[WindowProblem], xs: list[np.ndarray]) -> list[tuple]:
+    def evaluate(self, problems: list[WindowProblem], xs: list[np.ndarray]) -> list[tuple]:
         """(scores, trajectories) of the samples xs[i] (B_i, n) of problems[i], one rollout."""
         t0 = time.perf_counter()
         ctrls = [p.ctrl(x) for p, x in zip(problems, xs)]
@@ -94,17 +94,17 @@ class WindowSearch:
         return out
 
     @staticmethod
-    def _update(best: Best | None, x: np.ndarray, scores, part: Trajectories,
-                fitness: np.ndarray) -> Best:
+    def keep_better(best: Best | None, x: np.ndarray, scores, part: Trajectories,
+                    fitness: np.ndarray) -> Best:
         """Keep the lowest ranked fitness seen (valid samples before invalid ones)."""
         k = int(np.argmin(fitness))
         if best is not None and fitness[k] >= best.fitness:
             return best
         return Best(x=np.array(x[k]), loss=float(scores.total[k]), fitness=float(fitness[k]),
-                     valid=bool(np.isfinite(scores.total[k])),
-                     terms={n: float(v[k]) for n, v in scores.terms.items()},
-                     states=part.states[k].copy(), sensors=part.sensors[k].copy(),
-                     ctrl=part.ctrl[k].copy())
+                    valid=bool(np.isfinite(scores.total[k])),
+                    terms={n: float(v[k]) for n, v in scores.terms.items()},
+                    states=part.states[k].copy(), sensors=part.sensors[k].copy(),
+                    ctrl=part.ctrl[k].copy())
 
     def run(self, seeds: list[int], label: str, progress: bool, force_start: int | None = None
             ) -> tuple[list[Best], list[dict]]:
@@ -121,7 +121,7 @@ class WindowSearch:
         # rollout each; the search goes on from the best (its problem replaces the original).
         groups = [[p] + [p.starting_from(a) for a in p.alternatives] for p in self.problems]
         flat = [c for g in groups for c in g]
-        evaluated = self._evaluate(flat, [c.x0.reshape(1, -1) for c in flat])
+        evaluated = self.evaluate(flat, [c.x0.reshape(1, -1) for c in flat])
         best: list[Best | None] = [None] * len(self.problems)
         initial, row = [], 0
         for i, group in enumerate(groups):
@@ -133,7 +133,8 @@ class WindowSearch:
             s, part = evaluated[row + k]
             self.problems[i] = group[k]
             self.evaluations[i] = len(group)
-            best[i] = self._update(None, group[k].x0.reshape(1, -1), s, part, fitness[k:k + 1])
+            best[i] = self.keep_better(None, group[k].x0.reshape(1, -1), s, part,
+                                       fitness[k:k + 1])
             s0 = evaluated[row][0]
             initial.append({"loss": float(s0.total[0]), "valid": bool(np.isfinite(s0.total[0])),
                             "terms": {n: float(v[0]) for n, v in s0.terms.items()}, "start": k})
@@ -147,12 +148,12 @@ class WindowSearch:
             warnings.filterwarnings("ignore", message="elements of z2", category=UserWarning)
             for _ in range(self.cfg.iterations):
                 xs = [np.vstack([np.array(es.ask()), es.mean[None]]) for es in strategies]
-                evaluated = self._evaluate(self.problems, xs)
+                evaluated = self.evaluate(self.problems, xs)
                 for i, (es, x, (scores, part)) in enumerate(zip(strategies, xs, evaluated)):
                     self.evaluations[i] += len(x)
                     fitness = ranked_fitness(scores, frames[i])
                     es.tell(list(x[:-1]), fitness[:-1].tolist())
-                    best[i] = self._update(best[i], x, scores, part, fitness)
+                    best[i] = self.keep_better(best[i], x, scores, part, fitness)
                 bar.update(1)
                 bar.set_postfix(loss=" ".join(f"{b.loss:.3g}" for b in best))
         bar.close()
@@ -193,9 +194,10 @@ def search_averaged(problems: list[WindowProblem], simulator: Simulator,
         best = bests[kept]
         if len(same) > 1:
             x = np.mean([bests[r].x for r in same], axis=0)[None]
-            ((scores, part),) = search._evaluate([search.problems[rows[0]]], [x])
+            ((scores, part),) = search.evaluate([search.problems[rows[0]]], [x])
             frames = len(search.problems[rows[0]].positions)
-            average = WindowSearch._update(None, x, scores, part, ranked_fitness(scores, frames))
+            average = WindowSearch.keep_better(None, x, scores, part,
+                                               ranked_fitness(scores, frames))
             evaluations += 1
             if average.valid and average.loss <= max(bests[r].loss for r in same):
                 kept, best, label_kept = same[0], average, "average"
