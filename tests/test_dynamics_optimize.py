@@ -68,7 +68,10 @@ def test_same_seed_same_result_and_another_seed_differs(clip):
     np.testing.assert_array_equal(a.qpos, b.qpos)
     # Every window draws its own reproducible samples from (seed, window index).
     x0 = np.zeros(10)
-    draw = lambda seed, w: np.array(cma_strategy(x0, TINY, window_seed(seed, w)).ask())  # noqa: E731
+
+    def draw(seed: int, w: int) -> np.ndarray:
+        return np.array(cma_strategy(x0, TINY, window_seed(seed, w)).ask())
+
     np.testing.assert_array_equal(draw(0, 1), draw(0, 1))
     assert not np.array_equal(draw(0, 1), draw(0, 2))
     assert not np.array_equal(draw(0, 1), draw(7, 1))
