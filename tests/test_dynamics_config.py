@@ -101,6 +101,18 @@ def test_refine_within_is_in_the_key_only_where_it_changes_the_runs():
         DynamicsConfig(refine_within=0.0)
 
 
+def test_start_sight_smoothing_is_in_the_key_only_where_it_changes_the_runs():
+    off = DynamicsConfig()
+    assert "start_sight_smoothing" not in off.identity()  # the runs from before stop 48
+    on = dataclasses.replace(off, start_sight_smoothing=0.25)
+    assert on.identity()["start_sight_smoothing"] == 0.25
+    with pytest.raises(PhysposeError, match="start_sight_smoothing"):
+        DynamicsConfig(start_sight_smoothing=-0.1)
+    # The fast preset low-passes the start's depth speed; the paper preset keeps the recipe.
+    assert PRESETS["fast"].start_sight_smoothing == 0.25
+    assert PRESETS["paper"].start_sight_smoothing == 0.0
+
+
 def test_retry_within_is_in_the_key_only_where_it_changes_the_runs():
     fast = PRESETS["fast"]
     hopeless = dataclasses.replace(fast, retry_within=0.5)

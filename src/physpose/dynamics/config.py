@@ -44,6 +44,11 @@ class DynamicsConfig:
     inverse kinematics (stance.py), so the body stands on whole soles rather than box edges.
     balance: closed-loop COM feedback through the standing feet's ankles inside every rollout
     (balance.py; off while its frequency is 0).
+    start_sight_smoothing: s; a window started from the estimate (the clip's first, a restart,
+        every independent window) takes its root's horizontal velocity along the camera's line
+        of sight low-passed by a Gaussian of this sd (0: as the reference has it). The
+        estimate's depth is its noisiest part, and a body started with a depth speed that is
+        noise carries it away from the estimate (docs/dynamics.md, Start).
     tracking_start: also simulate each window once under the whole-body tracking controller
     (controller.py, gains ``controller``) and, when its targets score better than the
     inverse-dynamics ones, search spline offsets on top of them (exactly reproduced).
@@ -108,6 +113,7 @@ class DynamicsConfig:
     ground_snap: float = 0.03
     ground_reference: bool = True
     flat_stance: bool = True
+    start_sight_smoothing: float = 0.0
     tracking_start: bool = False
     controller: ControllerGains = field(default_factory=ControllerGains)
     balance: BalanceGains = field(default_factory=BalanceGains)
@@ -162,6 +168,9 @@ class DynamicsConfig:
                                 remedy=f"use one of {CAMERA_SETTINGS}")
         if self.iterations < 0:
             raise PhysposeError("dynamics iterations must be >= 0", remedy="use e.g. 20")
+        if not self.start_sight_smoothing >= 0:
+            raise PhysposeError(f"dynamics start_sight_smoothing={self.start_sight_smoothing} "
+                                "must be >= 0", remedy="use e.g. 0.25 (s), or 0 to switch it off")
 
     def identity(self) -> dict:
         """The fields that change results (everything but the thread count; ``camera`` only
@@ -181,6 +190,8 @@ class DynamicsConfig:
             out.pop("retry_within")  # likewise retried whatever the miss (stop 42)
         if not self.refine.enabled or self.refine_within == math.inf:
             out.pop("refine_within")  # likewise every attempt refined (stop 41)
+        if self.start_sight_smoothing == 0:
+            out.pop("start_sight_smoothing")  # likewise start velocities unsmoothed (stop 48)
         if not self.refine.enabled:
             out.pop("refine")  # likewise no iLQR refinement (added in stop 36)
         else:
@@ -232,9 +243,18 @@ PRESETS: dict[str, DynamicsConfig] = {
     # (retry_within, stop 42) did 0.90x the rollouts on motion capture, but walking_road
     # restarted 9 times instead of 7 and its feet slid in 9.5 % of frames instead of 4.2 %,
     # over the 5 % bound, and the run's MPJPE-G rose 15 mm (docs/dynamics.md, Hopeless windows).
+    # A start from the estimate takes its depth speed low-passed over 0.25 s (stop 48): on the
+    # real videos and pose2sim foot skate 4.1 -> 2.1 % (-1.9 +- 1.0 points), restarts 2.6 ->
+    # 2.0 per clip, pose2sim MPJPE-G 138 -> 126 mm; on motion capture MPJPE-G unchanged
+    # (+0.4 +- 2.8 mm), MPJPE-2d +2.3 +- 1.2 px (docs/dynamics.md, Start).
+    # A start from the estimate takes the estimate's depth speed low-passed over 0.25 s (stop
+    # 48): on the real videos and pose2sim foot skate 4.1 -> 2.1 % of frames (-1.9 +- 1.0
+    # points; walking_road 8.4 -> 3.2 %), restarts 2.6 -> 2.0 per clip, pose2sim MPJPE-G
+    # 138 -> 126 mm; on motion capture MPJPE-G +0.9 +- 2.7 mm, MPJPE-2d +2.1 +- 1.1 px, skate
+    # +0.7 +- 0.9 points (docs/dynamics.md, Start).
     "fast": DynamicsConfig(tracking_start=True, weights=ObjectiveWeights(com=0.0, swing=12.0),
                            refine=RefineConfig(iterations=6, root_position=1e2, image=3e3),
-                           retries=1),
+                           retries=1, start_sight_smoothing=0.25),
     # The paper's budget: 2000 iterations x 100 samples per 1 s window, full covariance; its
     # reference is the grounded estimate as it is (no flattened stance feet).
     "paper": DynamicsConfig(popsize=100, iterations=2000, diagonal=False, search="all",

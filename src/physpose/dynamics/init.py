@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import mujoco
 import numpy as np
+from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import nnls
 
 from physpose.dynamics import quat
@@ -253,6 +254,24 @@ def ground_state(model: mujoco.MjModel, qpos: np.ndarray, snap: float) -> np.nda
     out = np.array(qpos, dtype=float)
     if low < snap:
         out[2] -= low
+    return out
+
+
+def smooth_sight_velocity(qvel: np.ndarray, root: np.ndarray, camera_centre: np.ndarray,
+                          dt: float, sigma: float) -> np.ndarray:
+    """qvel (N, 54) with the root's horizontal velocity along the camera's line of sight
+    low-passed by a Gaussian of ``sigma`` s (the rest unchanged).
+
+    root (N, 3): the root's positions at the same steps (dt s apart); camera_centre (3,) or
+    (N, 3), world. A monocular estimate's depth is its noisiest part: its frame-to-frame depth
+    velocity swings by metres per second, and a body started with such a velocity carries it.
+    """
+    sight = root[:, :2] - np.broadcast_to(camera_centre, root.shape)[:, :2]
+    sight /= np.maximum(np.linalg.norm(sight, axis=1, keepdims=True), 1e-9)
+    along = np.einsum("ni,ni->n", qvel[:, :2], sight)
+    smoothed = gaussian_filter1d(along, sigma / dt, mode="nearest")
+    out = np.array(qvel, dtype=float)
+    out[:, :2] += (smoothed - along)[:, None] * sight
     return out
 
 

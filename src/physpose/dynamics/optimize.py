@@ -37,7 +37,7 @@ from physpose.dynamics import checkpoint
 from physpose.dynamics.config import DynamicsConfig
 from physpose.dynamics.init import (Reference, geom_lowest, ground_motion, ground_state,
                                     initial_coefficients, inverse_dynamics,
-                                    smooth_reference)
+                                    smooth_reference, smooth_sight_velocity)
 from physpose.dynamics.objective import (ObjectiveReference, ObjectiveWeights, make_reference)
 from physpose.dynamics.result import PhysicsResult, mean_window_loss
 from physpose.dynamics.search import Best, search_averaged, window_seed
@@ -72,6 +72,7 @@ class _Setup:
     step_times: np.ndarray    # (N,) s, time of each control step
     frame_steps: np.ndarray   # (T,) the simulation step nearest each frame
     root_residual: np.ndarray  # (N+1,) body weights, the estimate's unexplained root force
+    start_qvel: np.ndarray    # (N+1, 54) velocities a window started from the estimate takes
 
 
 def _check_inputs(kin: KinematicFit, obs: Observations) -> None:
@@ -122,13 +123,31 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
                                camera_travel=travel, swing_confidence=cfg.swing_confidence)
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
                   objective=objective, step_times=step_times, frame_steps=frame_steps,
-                  root_residual=needs.root_residual)
+                  root_residual=needs.root_residual,
+                  start_qvel=_start_velocities(kin, reference, travel, cfg.start_sight_smoothing))
+
+
+def _start_velocities(kin: KinematicFit, reference: Reference, travel: np.ndarray | None,
+                      sigma: float) -> np.ndarray:
+    """The reference's velocities with the root's depth speed low-passed by ``sigma`` s
+    (init.smooth_sight_velocity; as they are for 0), seen from the fit's camera, which moved
+    along ``travel`` (T, 3) where it travelled with the person."""
+    if sigma <= 0:
+        return reference.qvel
+    centre = -kin.T_world2cam[:3, :3].T @ kin.T_world2cam[:3, 3]
+    if travel is not None:
+        frame_times = np.arange(kin.num_frames) / kin.fps
+        step_times = np.arange(reference.num_steps + 1) * reference.dt
+        centre = centre + np.stack([np.interp(step_times, frame_times, travel[:, i])
+                                    for i in range(3)], axis=1)
+    return smooth_sight_velocity(reference.qvel, reference.qpos[:, :3], centre, reference.dt,
+                                 sigma)
 
 
 def _kinematic_state(setup: _Setup, step: int, snap: float) -> np.ndarray:
     ref = setup.reference
     qpos = ground_state(setup.sim.model, ref.qpos[step], snap)
-    return make_state(setup.sim, qpos, ref.qvel[step], time=step * setup.sim.dt)
+    return make_state(setup.sim, qpos, setup.start_qvel[step], time=step * setup.sim.dt)
 
 
 def searched_dofs(search: str) -> np.ndarray:

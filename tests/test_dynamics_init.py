@@ -1,0 +1,63 @@
+"""Start states of the optimisation (dynamics/init.py): velocities along the line of sight."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from physpose.dynamics.init import smooth_sight_velocity
+from physpose.skeleton import NV
+
+DT = 0.005
+
+
+def _walk_across(noise: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A root 4 m in front of a camera at the origin (looking along +y), walking across the
+    image at 1 m/s and away at 0.3 m/s, its depth velocity jittering by ``noise`` m/s."""
+    n = 800
+    rng = np.random.default_rng(seed)
+    qvel = rng.normal(0.0, 1.0, (n, NV))             # hinges and turning: left alone
+    qvel[:, 0] = 1.0
+    qvel[:, 1] = 0.3 + rng.normal(0.0, noise, n)
+    root = np.zeros((n, 3))
+    root[:, 0] = -2.0 + np.arange(n) * DT
+    root[:, 1] = 4.0
+    root[:, 2] = 0.9
+    return qvel, root
+
+
+def test_only_the_velocity_along_the_line_of_sight_changes():
+    qvel, root = _walk_across(noise=0.5)
+    out = smooth_sight_velocity(qvel, root, np.zeros(3), DT, sigma=0.25)
+    np.testing.assert_array_equal(out[:, 2:], qvel[:, 2:])
+    sight = root[:, :2] / np.linalg.norm(root[:, :2], axis=1, keepdims=True)
+    change = out[:, :2] - qvel[:, :2]
+    across = change[:, 0] * sight[:, 1] - change[:, 1] * sight[:, 0]
+    np.testing.assert_allclose(across, 0.0, atol=1e-12)
+    assert np.abs(change).max() > 0.5                 # the jitter was taken out
+
+
+def test_the_depth_jitter_is_low_passed_and_its_mean_kept():
+    qvel, root = _walk_across(noise=0.5)
+    out = smooth_sight_velocity(qvel, root, np.zeros(3), DT, sigma=0.25)
+    sight = root[:, :2] / np.linalg.norm(root[:, :2], axis=1, keepdims=True)
+    before, after = (np.einsum("ni,ni->n", v[:, :2], sight)[100:-100] for v in (qvel, out))
+    assert np.std(np.diff(after)) < 0.01 * np.std(np.diff(before))
+    assert abs(after.mean() - before.mean()) < 0.02
+
+
+def test_a_steady_walk_away_from_the_camera_is_unchanged():
+    qvel, root = _walk_across(noise=0.0)
+    qvel[:, 0] = 0.0                                   # straight away: sight stays along +y
+    root[:, 0] = 0.5
+    out = smooth_sight_velocity(qvel, root, np.zeros(3), DT, sigma=0.25)
+    np.testing.assert_allclose(out, qvel, atol=1e-12)
+
+
+def test_a_travelling_camera_centre_per_step_sets_the_line_of_sight():
+    # The camera travels beside the walker: always 4 m to its side along +y, so the line of
+    # sight stays +y although the walker crosses the world's x axis.
+    qvel, root = _walk_across(noise=0.5)
+    centre = root - np.array([0.0, 4.0, 0.0])
+    out = smooth_sight_velocity(qvel, root, centre, DT, sigma=0.25)
+    np.testing.assert_array_equal(out[:, 0], qvel[:, 0])
+    assert np.std(np.diff(out[100:-100, 1])) < 0.01 * np.std(np.diff(qvel[100:-100, 1]))
