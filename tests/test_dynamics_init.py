@@ -47,7 +47,7 @@ def test_the_depth_jitter_is_low_passed_and_its_mean_kept():
 
 def test_a_steady_walk_away_from_the_camera_is_unchanged():
     qvel, root = _walk_across(noise=0.0)
-    qvel[:, 0] = 0.0                                   # straight away: sight stays along +y
+    qvel[:, 0] = 0.0                  # standing at x = 0.5: the line of sight does not turn
     root[:, 0] = 0.5
     out = smooth_sight_velocity(qvel, root, np.zeros(3), DT, sigma=0.25)
     np.testing.assert_allclose(out, qvel, atol=1e-12)

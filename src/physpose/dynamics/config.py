@@ -243,10 +243,6 @@ PRESETS: dict[str, DynamicsConfig] = {
     # (retry_within, stop 42) did 0.90x the rollouts on motion capture, but walking_road
     # restarted 9 times instead of 7 and its feet slid in 9.5 % of frames instead of 4.2 %,
     # over the 5 % bound, and the run's MPJPE-G rose 15 mm (docs/dynamics.md, Hopeless windows).
-    # A start from the estimate takes its depth speed low-passed over 0.25 s (stop 48): on the
-    # real videos and pose2sim foot skate 4.1 -> 2.1 % (-1.9 +- 1.0 points), restarts 2.6 ->
-    # 2.0 per clip, pose2sim MPJPE-G 138 -> 126 mm; on motion capture MPJPE-G unchanged
-    # (+0.4 +- 2.8 mm), MPJPE-2d +2.3 +- 1.2 px (docs/dynamics.md, Start).
     # A start from the estimate takes the estimate's depth speed low-passed over 0.25 s (stop
     # 48): on the real videos and pose2sim foot skate 4.1 -> 2.1 % of frames (-1.9 +- 1.0
     # points; walking_road 8.4 -> 3.2 %), restarts 2.6 -> 2.0 per clip, pose2sim MPJPE-G

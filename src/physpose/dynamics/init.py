@@ -263,8 +263,8 @@ def smooth_sight_velocity(qvel: np.ndarray, root: np.ndarray, camera_centre: np.
     low-passed by a Gaussian of ``sigma`` s (the rest unchanged).
 
     root (N, 3): the root's positions at the same steps (dt s apart); camera_centre (3,) or
-    (N, 3), world. A monocular estimate's depth is its noisiest part: its frame-to-frame depth
-    velocity swings by metres per second, and a body started with such a velocity carries it.
+    (N, 3), world. A monocular estimate's depth is its noisiest part: its depth speed swings by
+    up to a metre per second within a few frames, and a body started with it carries it off.
     """
     sight = root[:, :2] - np.broadcast_to(camera_centre, root.shape)[:, :2]
     sight /= np.maximum(np.linalg.norm(sight, axis=1, keepdims=True), 1e-9)
