@@ -243,14 +243,14 @@ PRESETS: dict[str, DynamicsConfig] = {
     # (retry_within, stop 42) did 0.90x the rollouts on motion capture, but walking_road
     # restarted 9 times instead of 7 and its feet slid in 9.5 % of frames instead of 4.2 %,
     # over the 5 % bound, and the run's MPJPE-G rose 15 mm (docs/dynamics.md, Hopeless windows).
-    # A start from the estimate takes the estimate's depth speed low-passed over 0.25 s (stop
-    # 48): on the real videos and pose2sim foot skate 4.1 -> 2.1 % of frames (-1.9 +- 1.0
-    # points; walking_road 8.4 -> 3.2 %), restarts 2.6 -> 2.0 per clip, pose2sim MPJPE-G
-    # 138 -> 126 mm; on motion capture MPJPE-G +0.9 +- 2.7 mm, MPJPE-2d +2.1 +- 1.1 px, skate
-    # +0.7 +- 0.9 points (docs/dynamics.md, Start).
+    # The start's depth speed as the reference has it (start_sight_smoothing 0): low-passed
+    # over 0.25 s (stop 48) it lowered foot skate on the 7 real clips it was measured on
+    # (4.1 -> 2.1 %, -1.9 +- 1.0 points), but raised motion capture's MPJPE-2d by 2.1 +- 1.1
+    # px, and on three clips not in that measurement (two held-out segments and the demo) two
+    # got worse (docs/dynamics.md, Start velocity along the line of sight).
     "fast": DynamicsConfig(tracking_start=True, weights=ObjectiveWeights(com=0.0, swing=12.0),
                            refine=RefineConfig(iterations=6, root_position=1e2, image=3e3),
-                           retries=1, start_sight_smoothing=0.25),
+                           retries=1),
     # The paper's budget: 2000 iterations x 100 samples per 1 s window, full covariance; its
     # reference is the grounded estimate as it is (no flattened stance feet).
     "paper": DynamicsConfig(popsize=100, iterations=2000, diagonal=False, search="all",
