@@ -48,7 +48,8 @@ class DynamicsConfig:
         every independent window) takes its root's horizontal velocity along the camera's line
         of sight low-passed by a Gaussian of this sd (0: as the reference has it). The
         estimate's depth is its noisiest part, and a body started with a depth speed that is
-        noise carries it away from the estimate (docs/dynamics.md, Start).
+        noise carries it away from the estimate (docs/dynamics.md, Start velocity along the
+        line of sight: measured at 0.25 s, off in both presets).
     tracking_start: also simulate each window once under the whole-body tracking controller
     (controller.py, gains ``controller``) and, when its targets score better than the
     inverse-dynamics ones, search spline offsets on top of them (exactly reproduced).
