@@ -395,15 +395,24 @@ class _Problem:
         return ks, Ks
 
 
+def camera_centres(T_world2cam: np.ndarray, steps: np.ndarray,
+                   travel_steps: np.ndarray | None = None,
+                   travel: np.ndarray | None = None) -> np.ndarray:
+    """(len(steps), 3) the camera's centre in the world at each step: still, or moved on by
+    ``travel`` (F, 3), its path at the (fractional) steps ``travel_steps`` (F,), interpolated."""
+    R, tr = T_world2cam[:3, :3], T_world2cam[:3, 3]
+    centre = np.broadcast_to(-R.T @ tr, (len(steps), 3)).copy()
+    if travel is not None:
+        centre += np.column_stack([np.interp(steps, travel_steps, travel[:, i])
+                                   for i in range(3)])
+    return centre
+
+
 def _lines_of_sight(root: np.ndarray, camera: ImageTerm) -> np.ndarray:
     """(n+1, 3) unit vectors from the camera's centre to the reference root at each state
     (a travelling camera's centre moved on by its path, interpolated between frames)."""
-    R, tr = camera.T_world2cam[:3, :3], camera.T_world2cam[:3, 3]
-    centre = np.broadcast_to(-R.T @ tr, root.shape).copy()
-    if camera.camera_travel is not None:
-        steps = np.arange(len(root))
-        centre += np.column_stack([np.interp(steps, camera.steps, camera.camera_travel[:, i])
-                                   for i in range(3)])
+    centre = camera_centres(camera.T_world2cam, np.arange(len(root)), camera.steps,
+                            camera.camera_travel)
     sight = root - centre
     return sight / np.maximum(np.linalg.norm(sight, axis=1, keepdims=True), 1e-9)
 

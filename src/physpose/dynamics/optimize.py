@@ -48,7 +48,7 @@ from physpose.dynamics.stretches import shift_stretches, stretch_shifts, transla
 from physpose.dynamics.travel import camera_travel, camera_travels
 from physpose.dynamics.balance import balance_plan
 from physpose.dynamics.controller import track_reference
-from physpose.dynamics.ilqr import ImageTerm, refine_targets
+from physpose.dynamics.ilqr import ImageTerm, camera_centres, refine_targets
 from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
                                        score, step_position, window_over)
 from physpose.errors import PhysposeError
@@ -134,12 +134,9 @@ def _start_velocities(kin: KinematicFit, reference: Reference, travel: np.ndarra
     along ``travel`` (T, 3) where it travelled with the person."""
     if sigma <= 0:
         return reference.qvel
-    centre = -kin.T_world2cam[:3, :3].T @ kin.T_world2cam[:3, 3]
-    if travel is not None:
-        frame_times = np.arange(kin.num_frames) / kin.fps
-        step_times = np.arange(reference.num_steps + 1) * reference.dt
-        centre = centre + np.stack([np.interp(step_times, frame_times, travel[:, i])
-                                    for i in range(3)], axis=1)
+    frame_steps = step_position(np.arange(kin.num_frames), kin.fps, reference.dt)
+    centre = camera_centres(kin.T_world2cam, np.arange(reference.num_steps + 1), frame_steps,
+                            travel)
     return smooth_sight_velocity(reference.qvel, reference.qpos[:, :3], centre, reference.dt,
                                  sigma)
 
