@@ -417,9 +417,9 @@ def _check_detection_rate(path: Path, found: int, total: int, cfg: ObserveConfig
             f"a person was found in only {found} of {total} frames "
             f"({100 * found / total:.0f}%, need {100 * cfg.min_detection_fraction:.0f}%)",
             path=path,
-            remedy="use a video where one person is fully visible and reasonably large, pick "
-                   "a time range with --start/--end where they are, or lower "
-                   "min_detection_confidence")
+            remedy="use a video where one person is fully visible and reasonably large, or "
+                   "pick a time range with --start/--end where they are (from Python, "
+                   "ObserveConfig.min_detection_confidence lowers the detector's threshold)")
 
 
 def _to_arrays(obs: Observations) -> dict[str, np.ndarray]:

@@ -51,9 +51,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("video", type=Path, help="video file, or a keypoints .json/.npz")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--preset", choices=tuple(PRESETS), default="fast",
-                   help="optimisation budget: fast (default; measured 8-20 s per second of "
-                        "video on 2 cores) or paper (2000 x 100 samples per 1 s window: hours "
-                        "per second of video)")
+                   help="optimisation budget: fast (default; measured 27-57 s per second of "
+                        "video on 2 cores, 34.5 over the motion-capture clips) or paper "
+                        "(2000 x 100 samples per 1 s window: hours per second of video)")
     p.add_argument("--candidates", type=int, metavar="N",
                    help="optimise the whole clip N times (seeds 0..N-1) and keep the run with "
                         "the lowest loss: N times the time (default 1)")
@@ -65,8 +65,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="iLQR iterations refining each window's servo targets towards the "
                         "estimate and the detections after the search (0: off; default: the "
                         "preset's, 6 in fast, "
-                        "0 in paper). About 1.4 s per iteration and window on 2 cores "
-                        "(docs/dynamics.md, iLQR refinement)")
+                        "0 in paper). On a simulated clip six iterations took 8.5 s per second "
+                        "of video beside the search's 11.8 s (docs/dynamics.md, Speed)")
     p.add_argument("--balance-hz", type=float, metavar="HZ",
                    help="closed-loop balance feedback (centre of mass through the standing "
                         "ankles) in every simulated sample, Hz, e.g. 0.5; 0 (the default) is "
