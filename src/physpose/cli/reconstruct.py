@@ -51,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("video", type=Path, help="video file, or a keypoints .json/.npz")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--preset", choices=tuple(PRESETS), default="fast",
-                   help="optimisation budget: fast (default; measured 27-57 s per second of "
+                   help="optimisation budget: fast (default; measured 25-57 s per second of "
                         "video on 2 cores, 34.5 over the motion-capture clips) or paper "
                         "(2000 x 100 samples per 1 s window: hours per second of video)")
     p.add_argument("--candidates", type=int, metavar="N",
