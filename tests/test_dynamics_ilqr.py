@@ -101,7 +101,7 @@ def test_a_rejected_step_keeps_its_linearisation(stepping, monkeypatch):
 
 @pytest.mark.parametrize("changes", [{"iterations": -1}, {"derivative_stride": 0},
                                      {"hinge": -1.0}, {"control": float("nan")},
-                                     {"keep_ratio": -1.0}])
+                                     {"keep_ratio": -1.0}, {"handover": -1.0}])
 def test_bad_refine_settings_are_refused(changes):
     with pytest.raises(PhysposeError):
         RefineConfig(**changes)
@@ -122,6 +122,30 @@ def test_refinement_off_leaves_checkpoint_keys_as_they_were():
     assert "root_depth" not in on.identity()["refine"]
     deep = DynamicsConfig(refine=RefineConfig(iterations=3, root_depth=900.0))
     assert deep.identity()["refine"]["root_depth"] == 900.0
+    # And the handover weight, 1 (unweighted) unless asked for.
+    assert "handover" not in on.identity()["refine"]
+    handed = DynamicsConfig(refine=RefineConfig(iterations=3, handover=20.0))
+    assert handed.identity()["refine"]["handover"] == 20.0
+
+
+def test_the_handover_weight_pulls_the_next_windows_start_onto_the_reference(stepping):
+    """From crouched targets, two iterations leave the motion between its start and the
+    reference; weighting the state the next window would start from brings that state (and
+    not the window's last) nearer the reference than the same refinement without it."""
+    sim, state0, targets, truth = stepping
+    wrong = targets.copy()
+    for name in ("l_hip_y", "r_hip_y", "l_knee_y", "spine_y"):
+        wrong[:, DOF_NAMES.index(name)] += 0.08
+    qpos, qvel = truth[:, 1:1 + NQ], truth[:, 1 + NQ:1 + NQ + NV]
+    handover = len(targets) // 2
+
+    def error_at_handover(weight: float) -> float:
+        cfg = RefineConfig(iterations=2, handover=weight)
+        refined = refine_targets(sim.model, state0, wrong, qpos, qvel, cfg,
+                                 handover_step=handover)
+        return _hinge_rms(refined.states[handover:handover + 1], truth[handover:handover + 1])
+
+    assert error_at_handover(50.0) < 0.7 * error_at_handover(1.0)
 
 
 def test_threads_do_not_change_the_result(stepping):

@@ -200,6 +200,8 @@ class DynamicsConfig:
                 out["refine"].pop("keep_ratio")  # likewise the keep test before it was a setting
             if self.refine.root_depth == 0:
                 out["refine"].pop("root_depth")  # likewise no depth term (stop 41)
+            if self.refine.handover == 1.0:
+                out["refine"].pop("handover")  # likewise the handover state unweighted (stop 52)
         return out
 
     def window_identity(self) -> dict:

@@ -72,7 +72,8 @@ class RefineConfig:
     re-projection error, in metres at the person's depth, confidence-weighted, Huber beyond
     image_huber m), root_depth (1/m^2: added to root_position along the camera's line of sight
     to the reference root, where the image cannot see; needs the camera of ``ImageTerm``);
-    terminal: the last state's weight multiplier.
+    terminal: the last state's weight multiplier; handover: that of the state the next
+    window starts from (when the caller names its step), which the next window inherits.
     keep_ratio: a window keeps the refined targets when their objective (the search's, not
     this tracking cost) is at most keep_ratio times the search's result.
     derivative_stride: steps between linearisations (each is held until the next).
@@ -91,6 +92,7 @@ class RefineConfig:
     image_huber: float = 0.03
     root_depth: float = 0.0
     terminal: float = 5.0
+    handover: float = 1.0
     keep_ratio: float = 1.5
     derivative_stride: int = 2
     regularisation: float = 30.0
@@ -144,7 +146,8 @@ class _Problem:
 
     def __init__(self, model: mujoco.MjModel, state0: np.ndarray, ref_qpos: np.ndarray,
                  ref_qvel: np.ndarray, u_start: np.ndarray, cfg: RefineConfig,
-                 feet: tuple[int, ...] = (), image: ImageTerm | None = None):
+                 feet: tuple[int, ...] = (), image: ImageTerm | None = None,
+                 handover_step: int | None = None):
         self.model, self.state0, self.cfg = model, state0, cfg
         self.image = image if cfg.image else None
         self.sight = _lines_of_sight(ref_qpos[:, :3], image) \
@@ -161,6 +164,8 @@ class _Problem:
         n = len(u_start)
         self.step_scale = np.ones(n + 1)  # per state: the start is given, the last weighs more
         self.step_scale[0], self.step_scale[-1] = 0.0, cfg.terminal
+        if handover_step is not None and 0 < handover_step <= n:
+            self.step_scale[handover_step] *= cfg.handover
         self.lxx = np.concatenate([wq, wv])[None] * self.step_scale[:, None]  # (n+1, 2 nv)
 
     def _qpos(self, states: np.ndarray) -> np.ndarray:
@@ -420,16 +425,18 @@ def _lines_of_sight(root: np.ndarray, camera: ImageTerm) -> np.ndarray:
 def refine_targets(model: mujoco.MjModel, state0: np.ndarray, ctrl: np.ndarray,
                    ref_qpos: np.ndarray, ref_qvel: np.ndarray, cfg: RefineConfig,
                    nthread: int = 1, feet: tuple[int, ...] = (),
-                   image: ImageTerm | None = None) -> Refined:
+                   image: ImageTerm | None = None, handover_step: int | None = None
+                   ) -> Refined:
     """iLQR on the servo targets ctrl (n, 48) from state0 (FULLPHYSICS) towards the reference
     states ref_qpos (n+1, nq), ref_qvel (n+1, nv). feet: geom ids of the foot boxes (the
-    ``foot_slide`` term). image: the detections for the ``image`` term. Deterministic; nthread
+    ``foot_slide`` term). image: the detections for the ``image`` term. handover_step: the
+    state the next window starts from (weighted ``handover`` times). Deterministic; nthread
     threads take the derivatives (the result does not depend on it)."""
     start = time.perf_counter()
     pool = ThreadPoolExecutor(nthread) if nthread > 1 else None
     try:
         problem = _Problem(model, state0, ref_qpos, ref_qvel, np.asarray(ctrl, dtype=float),
-                           cfg, feet, image)
+                           cfg, feet, image, handover_step)
         return _iterate(problem, cfg, pool, nthread, start)
     finally:
         if pool is not None:

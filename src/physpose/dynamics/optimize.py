@@ -214,11 +214,13 @@ def _handover_error(setup: _Setup, best: Best, win: Window, step_end: int) -> fl
 
 
 def _refine(setup: _Setup, problem: WindowProblem, best: Best, initial: dict,
-            simulator: Simulator, cfg: DynamicsConfig, timing: dict) -> tuple[Best, dict]:
+            simulator: Simulator, cfg: DynamicsConfig, timing: dict,
+            step_end: int | None = None) -> tuple[Best, dict]:
     """The search's result refined by iLQR (ilqr.py) towards the reference; kept when it is
     valid and its objective is at most ``keep_ratio`` times the search's (the objective and the
     refinement's tracking cost differ, so a small rise is allowed). The record gets
-    ``refine``: tracking cost before and after, objective before, seconds, kept."""
+    ``refine``: tracking cost before and after, objective before, seconds, kept. step_end:
+    where the next window starts from this one's state (None for independent windows)."""
     win = problem.window
     ref = setup.reference
     steps = np.minimum(np.arange(win.start_step, win.end_step + 1), ref.num_steps)
@@ -235,7 +237,9 @@ def _refine(setup: _Setup, problem: WindowProblem, best: Best, initial: dict,
                           site_ids=setup.sim.body.landmark_site_ids,
                           camera_travel=None if travel is None else travel[frames])
     refined = refine_targets(model, problem.state0, best.ctrl[:win.num_steps], ref.qpos[steps],
-                             ref.qvel[steps], cfg.refine, cfg.nthread, feet, image)
+                             ref.qvel[steps], cfg.refine, cfg.nthread, feet, image,
+                             handover_step=None if step_end is None
+                             else step_end - win.start_step)
     timing["refine"] = timing.get("refine", 0.0) + refined.seconds
     traj = simulator.run(problem.state0, refined.ctrl[None])
     scores, _ = score(problem.starting_from(refined.ctrl), traj, setup.objective, cfg.weights,
@@ -317,7 +321,7 @@ def _refine_logged(setup: _Setup, searched: WindowProblem, best: Best, initial: 
                    simulator: Simulator, cfg: DynamicsConfig, timing: dict, step_end: int,
                    log: dict) -> tuple[Best, dict, float]:
     """_refine, then the handover error of its result, both noted in an attempt's ``log``."""
-    best, initial = _refine(setup, searched, best, initial, simulator, cfg, timing)
+    best, initial = _refine(setup, searched, best, initial, simulator, cfg, timing, step_end)
     error = _handover_error(setup, best, searched.window, step_end)
     log.update(refined=_finite_or_none(error), refine_seconds=initial["refine"]["seconds"])
     return best, initial, error
