@@ -27,14 +27,16 @@ Cost, summed over the window's states 1..n and controls 0..n-1:
 
 e_q = q_t minus the reference's q (MuJoCo's position difference: root translation in world
 axes, root rotation in the pelvis frame, hinge angles), e_v the velocity difference; the last
-state weighs ``terminal`` times. The reference is the smoothed (grounded, flat-footed)
-estimate the search follows; the control term keeps the targets near where they started. The
-estimate's standing feet slide where it is noisy, and a body made to follow its root closely
-would slide its feet too: the foot-slide term (Gauss-Newton, on the horizontal velocity of the
-lowest corner of each foot box within 1 cm of the floor, the point a sliding foot drags) keeps
-them where they stand, while a foot may still roll over its toe or heel edge. Optional terms:
-the detections' re-projection error (``image``, Gauss-Newton through the landmark sites'
-Jacobians) and the root's offset along the camera's line of sight (``root_depth``).
+state weighs ``terminal`` times (and the one the next window starts from ``handover`` times, 1
+by default: measured, it did not bring that state nearer; docs/dynamics.md). The reference is
+the smoothed (grounded, flat-footed) estimate the search follows; the control term keeps the
+targets near where they started. The estimate's standing feet slide where it is noisy, and a
+body made to follow its root closely would slide its feet too: the foot-slide term
+(Gauss-Newton, on the horizontal velocity of the lowest corner of each foot box within 1 cm of
+the floor, the point a sliding foot drags) keeps them where they stand, while a foot may still
+roll over its toe or heel edge. Optional terms: the detections' re-projection error (``image``,
+Gauss-Newton through the landmark sites' Jacobians) and the root's offset along the camera's
+line of sight (``root_depth``).
 
 The fast preset runs six iterations after every window's search (measured on motion capture:
 nearer the truth on everyday motions, fewer restarts, a little further on athletic ones;
