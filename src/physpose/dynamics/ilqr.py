@@ -166,8 +166,8 @@ class _Problem:
         n = len(u_start)
         self.step_scale = np.ones(n + 1)  # per state: the start is given, the last weighs more
         self.step_scale[0], self.step_scale[-1] = 0.0, cfg.terminal
-        if handover_step is not None and 0 < handover_step <= n:
-            self.step_scale[handover_step] *= cfg.handover
+        if handover_step is not None and 0 < handover_step < n:  # the last is terminal's
+            self.step_scale[handover_step] = cfg.handover
         self.lxx = np.concatenate([wq, wv])[None] * self.step_scale[:, None]  # (n+1, 2 nv)
 
     def _qpos(self, states: np.ndarray) -> np.ndarray:
@@ -432,7 +432,8 @@ def refine_targets(model: mujoco.MjModel, state0: np.ndarray, ctrl: np.ndarray,
     """iLQR on the servo targets ctrl (n, 48) from state0 (FULLPHYSICS) towards the reference
     states ref_qpos (n+1, nq), ref_qvel (n+1, nv). feet: geom ids of the foot boxes (the
     ``foot_slide`` term). image: the detections for the ``image`` term. handover_step: the
-    state the next window starts from (weighted ``handover`` times). Deterministic; nthread
+    state the next window starts from (weighted ``handover`` times; ignored at the last
+    state, a clip's last window, which ``terminal`` weighs). Deterministic; nthread
     threads take the derivatives (the result does not depend on it)."""
     start = time.perf_counter()
     pool = ThreadPoolExecutor(nthread) if nthread > 1 else None
