@@ -34,11 +34,17 @@ def _hinge_rms(states: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt(np.mean((states[:, 8:1 + NQ] - truth[:, 8:1 + NQ]) ** 2)))
 
 
-def test_refinement_finds_the_motion_from_wrong_targets(stepping):
-    sim, state0, targets, truth = stepping
+def _crouched(targets: np.ndarray) -> np.ndarray:
+    """The targets of a crouched, leaning motion instead (hips, left knee, spine +0.08 rad)."""
     wrong = targets.copy()
     for name in ("l_hip_y", "r_hip_y", "l_knee_y", "spine_y"):
-        wrong[:, DOF_NAMES.index(name)] += 0.08  # rad: a crouched, leaning motion instead
+        wrong[:, DOF_NAMES.index(name)] += 0.08
+    return wrong
+
+
+def test_refinement_finds_the_motion_from_wrong_targets(stepping):
+    sim, state0, targets, truth = stepping
+    wrong = _crouched(targets)
     with Simulator(sim, nthread=1) as simulator:
         start = simulator.run(state0, wrong[None]).states[0]
     qpos, qvel = truth[:, 1:1 + NQ], truth[:, 1 + NQ:1 + NQ + NV]
@@ -130,12 +136,10 @@ def test_refinement_off_leaves_checkpoint_keys_as_they_were():
 
 def test_the_handover_weight_pulls_the_next_windows_start_onto_the_reference(stepping):
     """From crouched targets, two iterations leave the motion between its start and the
-    reference; weighting the state the next window would start from brings that state (and
-    not the window's last) nearer the reference than the same refinement without it."""
+    reference; weighting the state the next window would start from brings that state
+    nearer the reference than the same refinement without it."""
     sim, state0, targets, truth = stepping
-    wrong = targets.copy()
-    for name in ("l_hip_y", "r_hip_y", "l_knee_y", "spine_y"):
-        wrong[:, DOF_NAMES.index(name)] += 0.08
+    wrong = _crouched(targets)
     qpos, qvel = truth[:, 1:1 + NQ], truth[:, 1 + NQ:1 + NQ + NV]
     handover = len(targets) // 2
 
