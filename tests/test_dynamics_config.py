@@ -167,3 +167,33 @@ def test_the_benchmark_seed_reaches_the_search_and_seed_0_changes_nothing(monkey
     assert seen == [(fast, 0.005), (dataclasses.replace(fast, seed=3), 0.005)] * 2 + [
         (ten_ms, 0.01), (dataclasses.replace(ten_ms, seed=3), 0.01)]
     assert ten_ms.refine.derivative_stride == 1 and fast.refine.derivative_stride == 2
+
+
+def test_the_paper_variant_runs_the_paper_preset(monkeypatch):
+    """`--variant dynamics-paper` optimises the SO+GT fit with the paper's budget."""
+    import physpose.dynamics.variants as dynamics_variants
+    import physpose.kinematics.fit as kinematics_fit
+    from physpose.benchmark import VariantContext, get_variant
+    from physpose.shape import BodyShape
+
+    class Stop(Exception):
+        pass
+
+    seen = []
+
+    def optimise(body, kin, obs, config, progress):
+        seen.append(config)
+        raise Stop
+
+    fitted = []
+
+    def fit(obs, config, **kwargs):
+        fitted.append(config.variant)
+        return SimpleNamespace(shape=BodyShape.from_height(1.7))
+
+    monkeypatch.setattr(kinematics_fit, "fit_kinematics", fit)
+    monkeypatch.setattr(dynamics_variants, "optimize_dynamics", optimise)
+    with pytest.raises(Stop):
+        get_variant("dynamics-paper")(None, VariantContext())
+    assert seen == [PRESETS["paper"]] and seen[0].iterations == 2000 and seen[0].popsize == 100
+    assert fitted == ["SO+GT"]
