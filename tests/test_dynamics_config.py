@@ -136,64 +136,61 @@ def test_the_presets_retry_hopeless_windows_and_a_variant_does_not():
     assert NO_HOPELESS_RETRY == dataclasses.replace(PRESETS["fast"], retry_within=0.5)
 
 
-def test_the_benchmark_seed_reaches_the_search_and_seed_0_changes_nothing(monkeypatch):
+class _Stop(Exception):
+    """Raised by the stubbed optimiser once it has recorded what it was given."""
+
+
+@pytest.fixture
+def stubbed_dynamics(monkeypatch):
+    """The dynamics variants with the kinematic fit and the optimiser stubbed out: the fit
+    records its variant name in ``fitted``, the optimiser its config and the body's time step
+    in ``seen``, then raises _Stop."""
+    import physpose.dynamics.variants as dynamics_variants
+    import physpose.kinematics.fit as kinematics_fit
+    from physpose.benchmark import oracle
+    from physpose.shape import BodyShape
+
+    stub = SimpleNamespace(seen=[], fitted=[])
+    kin = SimpleNamespace(shape=BodyShape.from_height(1.7))
+
+    def fit(obs, config, **kwargs):
+        stub.fitted.append(config.variant)
+        return kin
+
+    def optimise(body, kin, obs, config, progress):
+        stub.seen.append((config, body.model.opt.timestep))
+        raise _Stop
+
+    monkeypatch.setattr(kinematics_fit, "fit_kinematics", fit)
+    monkeypatch.setattr(oracle, "_truth_fit", lambda *args: kin)
+    monkeypatch.setattr(dynamics_variants, "optimize_dynamics", optimise)
+    return stub
+
+
+def test_the_benchmark_seed_reaches_the_search_and_seed_0_changes_nothing(stubbed_dynamics):
     """`physpose benchmark --seed N` (VariantContext.seed) offsets the CMA-ES seed of the
     dynamics variants as well as drawing the detector noise; under seed 0 the configs, and so
     their checkpoint keys, are those measured before it did."""
     import physpose.dynamics.variants as dynamics_variants
-    import physpose.kinematics.fit as kinematics_fit
     from physpose.benchmark import VariantContext, get_variant
-    from physpose.benchmark import oracle
-    from physpose.shape import BodyShape
 
-    class Stop(Exception):
-        pass
-
-    seen = []
-
-    def optimise(body, kin, obs, config, progress):
-        seen.append((config, body.model.opt.timestep))
-        raise Stop
-
-    kin = SimpleNamespace(shape=BodyShape.from_height(1.7))
-    monkeypatch.setattr(kinematics_fit, "fit_kinematics", lambda *args, **kwargs: kin)
-    monkeypatch.setattr(oracle, "_truth_fit", lambda *args: kin)
-    monkeypatch.setattr(dynamics_variants, "optimize_dynamics", optimise)
     for name in ("dynamics", "dynamics-truth", "dynamics-10ms"):
         for seed in (0, 3):
-            with pytest.raises(Stop):
+            with pytest.raises(_Stop):
                 get_variant(name)(None, VariantContext(seed=seed))
+    seen = stubbed_dynamics.seen
     fast, ten_ms = PRESETS["fast"], dynamics_variants.TEN_MS_STEPS
     assert seen == [(fast, 0.005), (dataclasses.replace(fast, seed=3), 0.005)] * 2 + [
         (ten_ms, 0.01), (dataclasses.replace(ten_ms, seed=3), 0.01)]
     assert ten_ms.refine.derivative_stride == 1 and fast.refine.derivative_stride == 2
 
 
-def test_the_paper_variant_runs_the_paper_preset(monkeypatch):
+def test_the_paper_variant_runs_the_paper_preset(stubbed_dynamics):
     """`--variant dynamics-paper` optimises the SO+GT fit with the paper's budget."""
-    import physpose.dynamics.variants as dynamics_variants
-    import physpose.kinematics.fit as kinematics_fit
     from physpose.benchmark import VariantContext, get_variant
-    from physpose.shape import BodyShape
 
-    class Stop(Exception):
-        pass
-
-    seen = []
-
-    def optimise(body, kin, obs, config, progress):
-        seen.append(config)
-        raise Stop
-
-    fitted = []
-
-    def fit(obs, config, **kwargs):
-        fitted.append(config.variant)
-        return SimpleNamespace(shape=BodyShape.from_height(1.7))
-
-    monkeypatch.setattr(kinematics_fit, "fit_kinematics", fit)
-    monkeypatch.setattr(dynamics_variants, "optimize_dynamics", optimise)
-    with pytest.raises(Stop):
+    with pytest.raises(_Stop):
         get_variant("dynamics-paper")(None, VariantContext())
+    seen = [config for config, _ in stubbed_dynamics.seen]
     assert seen == [PRESETS["paper"]] and seen[0].iterations == 2000 and seen[0].popsize == 100
-    assert fitted == ["SO+GT"]
+    assert stubbed_dynamics.fitted == ["SO+GT"]
