@@ -97,8 +97,9 @@ class DynamicsConfig:
     nthread: rollout threads (does not change results).
     """
 
-    # 1.5 s windows (handover after 0.4 or 0.6 s) were further from the truth on motion capture,
-    # and a handover after 0.2 s no nearer at 1.4x the time (docs/dynamics.md, Windows).
+    # 1.5 s windows (handover after 0.4 or 0.6 s) were further from the truth on motion capture;
+    # a handover after 0.2 s, at 1.4x the time, was no nearer there and moved the real clips'
+    # foot skate both ways (docs/dynamics.md, Windows).
     window: float = 1.0
     overlap: float = 0.6
     independent: bool = False

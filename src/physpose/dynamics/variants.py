@@ -89,8 +89,8 @@ FULL_OBJECTIVE = dataclasses.replace(SEARCH_ONLY, weights=ObjectiveWeights())
 
 register_variant("dynamics", _variant("SO+GT", PRESETS["fast"], "dynamics"))
 register_variant("dynamics-so", _variant("SO", PRESETS["fast"], "dynamics-so"))
-# The paper's budget (2000 iterations x 100 samples per window): 11-35 min per window on
-# a 2-core machine, so for a short clip or a larger machine.
+# The paper's budget (2000 iterations x 100 samples per window): 11-24 min per window
+# measured on 2-core machines, so for a short clip or a larger machine.
 register_variant("dynamics-paper", _variant("SO+GT", PRESETS["paper"], "dynamics-paper"))
 register_variant("dynamics-search", _variant("SO+GT", SEARCH_ONLY, "dynamics-search"))
 register_variant("dynamics-full", _variant("SO+GT", FULL_OBJECTIVE, "dynamics-full"))
