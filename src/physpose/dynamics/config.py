@@ -98,8 +98,8 @@ class DynamicsConfig:
     """
 
     # 1.5 s windows (handover after 0.4 or 0.6 s) were further from the truth on motion capture;
-    # a handover after 0.2 s, at 1.4x the time, was no nearer there and moved the real clips'
-    # foot skate both ways (docs/dynamics.md, Windows).
+    # a handover after 0.2 s, at 1.4x the time, was no nearer there, and its lower foot skate on
+    # the real clips under one seed did not hold under another (docs/dynamics.md, Windows).
     window: float = 1.0
     overlap: float = 0.6
     independent: bool = False
