@@ -123,6 +123,11 @@ def test_flags_make_the_pipeline_config():
                            ).dynamics.refine.iterations == 3
     assert not pipeline_config(_args("v.mp4", "--out", "o", "--refine", "0")
                                ).dynamics.refine.enabled
+    assert default.dynamics.reset_distance == 0.15
+    assert pipeline_config(_args("v.mp4", "--out", "o", "--restart-distance", "0.25")
+                           ).dynamics.reset_distance == 0.25
+    with pytest.raises(PhysposeError, match="--restart-distance 0.0 must be > 0"):
+        pipeline_config(_args("v.mp4", "--out", "o", "--restart-distance", "0"))
     assert default.dynamics.weights == PRESETS["fast"].weights
     paper = pipeline_config(_args("v.mp4", "--out", "o", "--weight", "com=15",
                                   "--weight", "POSE = 0.5", "--weight", "swing=0")
