@@ -176,7 +176,7 @@ def search_averaged(problems: list[WindowProblem], simulator: Simulator,
     and the number of evaluations.
 
     Why: the searches' offsets from their common start are nearly uncorrelated (0.13 on
-    motion-capture windows, docs/dynamics.md, Averaged searches): most of each is CMA-ES's
+    motion-capture windows, docs/dynamics.md, Search): most of each is CMA-ES's
     random walk in directions the loss hardly sees, which the average cancels while it keeps
     the correction they share."""
     n = cfg.searches
