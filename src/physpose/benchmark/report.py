@@ -88,7 +88,8 @@ def _time(values: dict, prefix: str = "") -> str:
 
 
 def render_markdown(doc: dict) -> str:
-    """The results as markdown: one Table-2-shaped table per kind, then per-clip tables."""
+    """The results as markdown: one Table-2-shaped table per kind, the paired differences
+    against the base variant (with two or more variants), then per-clip tables."""
     lines = ["# physpose benchmark", "",
              f"Command: `{doc['command']}`  ", f"Machine: {doc['machine']}", ""]
     for message in doc.get("skipped", []):
@@ -105,6 +106,8 @@ def render_markdown(doc: dict) -> str:
                 + [_fmt(agg.get("time_s.variant"), "{:.2f}") + " / " + _time(agg, "time_s.")]
                 for variant, agg in by_variant.items()]
         lines += _table(["Variant"] + [c[0] for c in cols] + ["Time (s)"], rows) + [""]
+    if doc.get("paired"):
+        lines += render_paired(doc["paired"], doc["paired_against"])
     for kind in doc["aggregate"]:
         cols = _columns(kind)
         lines += [f"### Per clip: {kind}", ""]
@@ -118,6 +121,44 @@ def render_markdown(doc: dict) -> str:
         lines += _table(["Clip", "Variant", "Frames"] + [c[0] for c in cols] + ["Time (s)"],
                         rows) + [""]
     return "\n".join(lines)
+
+
+def _finer(spec: str) -> str:
+    """A signed format one decimal finer than a report column's ("{:.0f}" -> "{:+.1f}")."""
+    digits = int(spec.split(".")[1][0]) if "." in spec else 0
+    return "{:+.%df}" % (digits + 1)
+
+
+def render_paired(paired: dict, base: str) -> list[str]:
+    """Markdown of `paired.paired_differences`: one table per kind, a cell per figure
+    "base -> variant (difference +- standard error)"."""
+    lines: list[str] = []
+    title = {key: name for name, key, _ in COLUMNS}
+    # Means as in the report's columns (percentages one decimal finer), differences finer still.
+    mean_spec = {key: ("{:.1f}" if key.endswith("_pct") else spec) for _, key, spec in COLUMNS}
+    for kind, by_variant in paired.items():
+        keys = list(dict.fromkeys(k for figures in by_variant.values() for k in figures))
+        rows = []
+        for name, figures in by_variant.items():
+            cells = []
+            for key in keys:
+                f = figures.get(key)
+                if f is None:
+                    cells.append("–")
+                    continue
+                diff = _finer(mean_spec[key])
+                se = ("" if f["standard_error"] is None
+                      else " +- " + diff.replace("+", "").format(f["standard_error"]))
+                cells.append(f"{mean_spec[key].format(f['base'])} -> "
+                             f"{mean_spec[key].format(f['variant'])} "
+                             f"({diff.format(f['difference'])}{se})")
+            rows.append([name, str(max(f["clips"] for f in figures.values()))] + cells)
+        lines += [f"## Paired against `{base}`: {KIND_TITLES.get(kind, kind)}", "",
+                  "Per clip, the variant's figure minus the base's on the same clip; mean +- "
+                  "standard error over the clips both have (within about two standard errors "
+                  "of zero is within the noise).", ""]
+        lines += _table(["Variant", "Clips"] + [title[k] for k in keys], rows) + [""]
+    return lines
 
 
 def write_results(doc: dict, out_dir: str | Path) -> tuple[Path, Path]:

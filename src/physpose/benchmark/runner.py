@@ -10,6 +10,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 
 from physpose.benchmark.material import Clip, Material, MaterialConfig, load_clips
+from physpose.benchmark.paired import paired_differences
 from physpose.benchmark.report import aggregate
 from physpose.benchmark.scoring import score_clip, truth_record
 from physpose.benchmark.variants import get_variant
@@ -18,10 +19,26 @@ from physpose.errors import PhysposeError
 
 @dataclass(frozen=True)
 class BenchmarkConfig:
-    """Which variants run, on material prepared how."""
+    """Which variants run, on material prepared how, and which one the others are paired
+    against (None: the first variant; see paired.py)."""
 
     variants: tuple[str, ...] = ("baseline",)
     material: MaterialConfig = MaterialConfig()
+    paired_against: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.paired_against is not None and self.paired_against not in self.variants:
+            raise PhysposeError(f"the paired comparison's base {self.paired_against!r} is not "
+                                "among the variants run",
+                                remedy=f"pass one of {', '.join(self.variants)}, or add it with "
+                                       "--variant")
+
+    @property
+    def base(self) -> str | None:
+        """The variant the others are paired against; None with a single variant."""
+        if len(self.variants) < 2:
+            return None
+        return self.paired_against or self.variants[0]
 
 
 def _log(message: str) -> None:
@@ -76,7 +93,9 @@ def run_clips(clips: Sequence[Clip], variants: Sequence[str],
 
 def results_document(results: list[dict], failures: list[dict], cfg: BenchmarkConfig, *,
                      skipped: Sequence[str] = (), command: str = "") -> dict:
-    """The document written to results.json (and rendered into results.md)."""
+    """The document written to results.json (and rendered into results.md); with two or more
+    variants it pairs them against ``cfg.base`` clip by clip ("paired")."""
+    base = cfg.base
     return {
         "command": command,
         "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared with other work)",
@@ -85,6 +104,9 @@ def results_document(results: list[dict], failures: list[dict], cfg: BenchmarkCo
         "failures": failures,
         "results": results,
         "aggregate": aggregate(results),
+        "paired_against": base,
+        "paired": ({} if base is None else paired_differences(
+            results, base, [v for v in cfg.variants if v != base])),
     }
 
 

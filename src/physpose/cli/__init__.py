@@ -18,6 +18,7 @@ SUBCOMMANDS: tuple[str, ...] = (
     "body",
     "export",
     "benchmark",
+    "compare",
     "reconstruct",
     "fit",
 )

@@ -57,6 +57,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="give variants the motion-capture truth: only the diagnostic variants "
                         "truth-ik and dynamics-truth read it (how well the body and the physics "
                         "follow a motion a person really made)")
+    p.add_argument("--paired-against", metavar="NAME",
+                   help="with two or more variants, the one the others are compared with clip "
+                        "by clip (mean +- standard error of the per-clip differences; default: "
+                        "the first --variant). `physpose compare` does the same across runs")
     p.add_argument("--out", type=Path, help="output folder for results.json and results.md")
     p.set_defaults(func=run)
 
@@ -87,13 +91,10 @@ def run(args: argparse.Namespace) -> int:
     if unknown:
         raise PhysposeError(f"unknown variant(s) {', '.join(unknown)}",
                             remedy=f"choose from: {', '.join(known)}")
-    materials, skipped = _materials(args)
-    for message in skipped:
-        print(f"benchmark: skipping: {message}", file=sys.stderr)
-    if not materials:
-        raise PhysposeError("no benchmark material found",
-                            remedy="pass --mocap/--multiview/--video or fetch the shared data")
+    # The configuration first: its checks (the paired base among the variants, the clip
+    # settings) fail before the material is prepared.
     cfg = BenchmarkConfig(variants=tuple(dict.fromkeys(variants)),
+                          paired_against=args.paired_against,
                           material=MaterialConfig(fps=args.fps, max_seconds=args.max_seconds,
                                                   start_seconds=args.start,
                                                   camera_azimuth_deg=args.camera_azimuth,
@@ -101,6 +102,12 @@ def run(args: argparse.Namespace) -> int:
                                                   known_height=args.known_height,
                                                   seed=args.seed, noiseless=args.noiseless,
                                                   truth_input=args.truth_input))
+    materials, skipped = _materials(args)
+    for message in skipped:
+        print(f"benchmark: skipping: {message}", file=sys.stderr)
+    if not materials:
+        raise PhysposeError("no benchmark material found",
+                            remedy="pass --mocap/--multiview/--video or fetch the shared data")
     command = shlex.join(["physpose", *sys.argv[1:]]) if sys.argv[1:2] == ["benchmark"] \
         else "physpose benchmark"
     doc = run_benchmark(materials, cfg, skipped=skipped, command=command)

@@ -1,0 +1,102 @@
+"""Paired comparison of benchmark variants: per-clip differences against a base variant.
+
+A variant's mean over a dozen clips moves by several millimetres between two runs that differ
+only in a seed (the simulation is chaotic), so comparing two means says little. Each clip is
+instead its own control: the figure of the variant minus the base's on the same clip, then the
+mean of those differences and its standard error (sample standard deviation / sqrt(clips)).
+A difference within about two standard errors of zero is within the noise.
+
+`paired_differences` works on the per-clip records of `results.json` (one run, or several
+merged by `merge_results`, e.g. a new variant's run against an earlier run of the default).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections import defaultdict
+from pathlib import Path
+
+from physpose.benchmark.report import KIND_COLUMNS
+from physpose.benchmark.scoring import TRUTH_ROW
+from physpose.errors import PhysposeError
+
+# The figures compared, in the paper's Table 2 order (a subset of report.COLUMNS).
+PAIRED_KEYS: tuple[str, ...] = ("mpjpe_g_mm", "mpjpe_pa_mm", "mpjpe_2d_px",
+                                "velocity_error_mps", "foot_skate_pct", "float_pct",
+                                "fallen_pct", "restarts")
+
+
+def _value(record: dict, key: str) -> float | None:
+    value = {**record.get("metrics", {}), **record.get("ground", {})}.get(key)
+    if isinstance(value, (int, float)) and math.isfinite(value):
+        return float(value)
+    return None
+
+
+def _summary(pairs: list[tuple[float, float]]) -> dict[str, float | int | None]:
+    n = len(pairs)
+    diffs = [v - b for b, v in pairs]
+    mean = sum(diffs) / n
+    se = (math.sqrt(sum((d - mean) ** 2 for d in diffs) / (n - 1) / n) if n > 1 else None)
+    return {"clips": n, "base": sum(b for b, _ in pairs) / n,
+            "variant": sum(v for _, v in pairs) / n, "difference": mean, "standard_error": se}
+
+
+def paired_differences(results: list[dict], base: str, variants: list[str] | None = None
+                       ) -> dict[str, dict[str, dict[str, dict]]]:
+    """kind -> variant -> figure -> {clips, base, variant, difference, standard_error}.
+
+    Only clips on which both the variant and ``base`` have a finite figure count for it;
+    ``standard_error`` is None with a single clip. ``variants``: those to compare (default:
+    every variant of the records but the base and the truth's own row, in order of appearance).
+    """
+    records = {(r["kind"], r["clip"], r["variant"]): r for r in results}
+    names = variants if variants is not None else list(dict.fromkeys(
+        r["variant"] for r in results if r["variant"] not in (base, TRUTH_ROW)))
+    out: dict[str, dict[str, dict[str, dict]]] = defaultdict(dict)
+    for kind in dict.fromkeys(r["kind"] for r in results):
+        keys = [k for k in PAIRED_KEYS if k in KIND_COLUMNS.get(kind, PAIRED_KEYS)]
+        for name in names:
+            clips = [c for (k, c, v) in records if k == kind and v == name
+                     and (kind, c, base) in records]
+            figures = {}
+            for key in keys:
+                pairs = [(_value(records[(kind, c, base)], key),
+                          _value(records[(kind, c, name)], key)) for c in clips]
+                pairs = [(b, v) for b, v in pairs if b is not None and v is not None]
+                if pairs:
+                    figures[key] = _summary(pairs)
+            if figures:
+                out[kind][name] = figures
+    return dict(out)
+
+
+def load_results(path: str | Path) -> dict:
+    """A results document written by `physpose benchmark` (its results.json, or its folder)."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "results.json"
+    if not path.is_file():
+        raise PhysposeError("benchmark results not found", path=path,
+                            remedy="pass a results.json written by `physpose benchmark --out "
+                                   "DIR`, or that folder")
+    try:
+        doc = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as err:
+        raise PhysposeError(f"not a benchmark results file ({err})", path=path,
+                            remedy="pass the results.json that `physpose benchmark` wrote") from err
+    if not isinstance(doc, dict) or not isinstance(doc.get("results"), list):
+        raise PhysposeError("not a benchmark results file (no per-clip results)", path=path,
+                            remedy="pass the results.json that `physpose benchmark` wrote")
+    return doc
+
+
+def merge_results(docs: list[dict]) -> list[dict]:
+    """The per-clip records of several results documents; where two have the same variant on
+    the same clip, the later document's record is kept."""
+    merged: dict[tuple[str, str, str], dict] = {}
+    for doc in docs:
+        for r in doc["results"]:
+            merged[(r["kind"], r["clip"], r["variant"])] = r
+    return list(merged.values())

@@ -1,0 +1,66 @@
+"""`physpose compare`: benchmark variants paired clip by clip, across one or more runs."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+from physpose.benchmark.paired import load_results, merge_results, paired_differences
+from physpose.benchmark.report import render_paired
+from physpose.benchmark.scoring import TRUTH_ROW
+from physpose.errors import PhysposeError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "compare", help="paired differences between benchmark variants, across runs",
+        description="Read results.json files written by `physpose benchmark` (e.g. a new "
+                    "variant's run and an earlier run of the default on the same clips) and "
+                    "print, per kind of material, each variant's per-clip differences from the "
+                    "base variant: their mean and standard error. Where two files have the "
+                    "same variant on the same clip, the later file's record is used.")
+    p.add_argument("results", nargs="+", type=Path, metavar="RESULTS",
+                   help="results.json of a benchmark run, or its --out folder")
+    p.add_argument("--base", required=True, metavar="NAME",
+                   help="the variant the others are compared with, e.g. dynamics")
+    p.add_argument("--variant", action="append", default=[], metavar="NAME",
+                   help="compare only these variants (repeatable; default: all but the base)")
+    p.add_argument("--out", type=Path, metavar="FILE",
+                   help="also write the comparison: FILE.md (markdown) or FILE.json")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    docs = [load_results(path) for path in args.results]
+    results = merge_results(docs)
+    present = list(dict.fromkeys(r["variant"] for r in results if r["variant"] != TRUTH_ROW))
+    missing = [v for v in [args.base, *args.variant] if v not in present]
+    if missing:
+        raise PhysposeError(f"variant(s) {', '.join(missing)} not in the results given",
+                            path=", ".join(str(p) for p in args.results),
+                            remedy=f"choose from: {', '.join(present)}")
+    variants = args.variant or [v for v in present if v != args.base]
+    if not variants:
+        raise PhysposeError(f"nothing to compare: the results hold only {args.base!r}",
+                            remedy="add the results.json of a run with another variant")
+    configs = {json.dumps(doc.get("config", {}).get("material"), sort_keys=True) for doc in docs}
+    if len(configs) > 1:
+        print("physpose compare: note: the runs prepared their material differently (seed, "
+              "length, camera...); their clips are compared as they are", file=sys.stderr)
+    paired = paired_differences(results, args.base, variants)
+    if not paired:
+        raise PhysposeError(f"no clip has both {args.base!r} and another variant",
+                            remedy="compare runs made on the same clips")
+    text = "\n".join(render_paired(paired, args.base))
+    print(text)
+    if args.out is not None:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        if args.out.suffix == ".json":
+            args.out.write_text(json.dumps({"base": args.base, "paired": paired}, indent=1,
+                                           allow_nan=False) + "\n")
+        else:
+            args.out.write_text(text + "\n")
+        print(f"wrote {args.out}")
+    return 0

@@ -1,0 +1,128 @@
+"""Paired comparison of benchmark variants: `paired_differences`, the report and `physpose compare`."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from physpose.benchmark.paired import merge_results, paired_differences
+from physpose.benchmark.report import render_markdown, write_results
+from physpose.benchmark.runner import BenchmarkConfig, results_document
+from physpose.benchmark.scoring import TRUTH_ROW
+from physpose.cli import main
+from physpose.errors import PhysposeError
+
+
+def _record(variant: str, clip: str, kind: str = "mocap", **metrics) -> dict:
+    return {"variant": variant, "kind": kind, "clip": clip, "source": f"{clip}.bvh", "frames": 10,
+            "fps": 25.0, "metrics": metrics, "ground": {}, "time_s": {"variant": 1.0}}
+
+
+def _results() -> list[dict]:
+    """Three clips: the variant's MPJPE-G is the base's + 1, + 2 and + 6 mm."""
+    rows = []
+    for clip, base_g, diff in (("a", 100.0, 1.0), ("b", 120.0, 2.0), ("c", 140.0, 6.0)):
+        rows.append(_record(TRUTH_ROW, clip, foot_skate_pct=0.0))
+        rows.append(_record("base", clip, mpjpe_g_mm=base_g, foot_skate_pct=4.0))
+        rows.append(_record("new", clip, mpjpe_g_mm=base_g + diff, foot_skate_pct=2.0))
+    return rows
+
+
+def test_per_clip_differences_give_their_mean_and_standard_error():
+    paired = paired_differences(_results(), "base")
+    assert list(paired) == ["mocap"] and list(paired["mocap"]) == ["new"]  # no truth row
+    g = paired["mocap"]["new"]["mpjpe_g_mm"]
+    diffs = [1.0, 2.0, 6.0]
+    sd = math.sqrt(sum((d - 3.0) ** 2 for d in diffs) / 2)
+    assert g["clips"] == 3 and g["base"] == pytest.approx(120.0)
+    assert g["variant"] == pytest.approx(123.0) and g["difference"] == pytest.approx(3.0)
+    assert g["standard_error"] == pytest.approx(sd / math.sqrt(3))
+    skate = paired["mocap"]["new"]["foot_skate_pct"]
+    assert skate["difference"] == pytest.approx(-2.0) and skate["standard_error"] == 0.0
+
+
+def test_only_clips_with_finite_figures_on_both_sides_are_paired():
+    rows = _results()
+    rows[2]["metrics"]["mpjpe_g_mm"] = float("nan")          # clip a: the variant failed a figure
+    rows = [r for r in rows if not (r["clip"] == "c" and r["variant"] == "base")]  # c: no base
+    g = paired_differences(rows, "base")["mocap"]["new"]["mpjpe_g_mm"]
+    assert g["clips"] == 1 and g["difference"] == pytest.approx(2.0)
+    assert g["standard_error"] is None                        # one clip: no spread to measure
+
+
+def test_videos_are_paired_on_the_figures_they_have():
+    rows = [_record("base", "v", "video", mpjpe_2d_px=10.0, mpjpe_g_mm=5.0),
+            _record("new", "v", "video", mpjpe_2d_px=12.0, mpjpe_g_mm=9.0)]
+    figures = paired_differences(rows, "base")["video"]["new"]
+    assert set(figures) == {"mpjpe_2d_px"}                    # no 3d error without a truth
+
+
+def test_the_results_pair_every_variant_against_the_first_and_report_it(tmp_path):
+    results = _results()
+    doc = results_document(results, [], BenchmarkConfig(variants=("base", "new")))
+    assert doc["paired_against"] == "base"
+    assert doc["paired"]["mocap"]["new"]["mpjpe_g_mm"]["difference"] == pytest.approx(3.0)
+    md = render_markdown(doc)
+    assert "## Paired against `base`: Motion capture" in md
+    assert "| new | 3 | 120 -> 123 (+3.0 +- 1.5) |" in md
+    json_path, _ = write_results(doc, tmp_path)
+    assert json.loads(json_path.read_text())["paired_against"] == "base"
+    single = results_document(results, [], BenchmarkConfig(variants=("base",)))
+    assert single["paired"] == {} and "Paired against" not in render_markdown(single)
+    chosen = results_document(results, [], BenchmarkConfig(variants=("new", "base"),
+                                                            paired_against="base"))
+    assert list(chosen["paired"]["mocap"]) == ["new"]
+
+
+def test_the_base_must_be_among_the_variants_run(tmp_path, capsys):
+    with pytest.raises(PhysposeError, match="not among the variants run"):
+        BenchmarkConfig(variants=("a", "b"), paired_against="c")
+    assert main(["benchmark", "--variant", "baseline", "--variant", "SO", "--paired-against",
+                 "SO+GT", "--mocap", str(tmp_path / "x.bvh"), "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err        # refused before the (missing) material is looked at
+    assert "'SO+GT' is not among the variants run" in err and "--variant" in err
+
+
+def _run(tmp_path, name: str, variants: tuple[str, ...], results: list[dict]):
+    doc = results_document(results, [], BenchmarkConfig(variants=variants))
+    return write_results(doc, tmp_path / name)[0]
+
+
+def test_compare_pairs_variants_across_runs(tmp_path, capsys):
+    rows = _results()
+    old = _run(tmp_path, "old", ("base",), [r for r in rows if r["variant"] != "new"])
+    new = _run(tmp_path, "new", ("new",), [r for r in rows if r["variant"] == "new"])
+    assert main(["compare", str(old), str(new.parent), "--base", "base",
+                 "--out", str(tmp_path / "cmp.md")]) == 0
+    out = capsys.readouterr().out
+    assert "| new | 3 | 120 -> 123 (+3.0 +- 1.5) |" in out
+    assert "(+3.0 +- 1.5)" in (tmp_path / "cmp.md").read_text()
+    assert main(["compare", str(old), str(new), "--base", "base",
+                 "--out", str(tmp_path / "cmp.json")]) == 0
+    saved = json.loads((tmp_path / "cmp.json").read_text())
+    assert saved["paired"]["mocap"]["new"]["mpjpe_g_mm"]["clips"] == 3
+
+
+def test_compare_errors_name_the_file_and_the_remedy(tmp_path, capsys):
+    run = _run(tmp_path, "run", ("base", "new"), _results())
+    assert main(["compare", str(run), "--base", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert str(run) in err and "choose from: base, new" in err
+    assert main(["compare", str(tmp_path / "missing"), "--base", "base"]) == 2
+    assert "benchmark results not found" in capsys.readouterr().err
+    junk = tmp_path / "junk.json"
+    junk.write_text("{not json")
+    assert main(["compare", str(junk), "--base", "base"]) == 2
+    assert "not a benchmark results file" in capsys.readouterr().err
+    only = _run(tmp_path, "only", ("base",), [r for r in _results() if r["variant"] != "new"])
+    assert main(["compare", str(only), "--base", "base"]) == 2
+    assert "nothing to compare" in capsys.readouterr().err
+
+
+def test_a_later_run_replaces_an_earlier_one_on_the_same_clip():
+    first = {"results": [_record("base", "a", mpjpe_g_mm=1.0)]}
+    second = {"results": [_record("base", "a", mpjpe_g_mm=2.0)]}
+    merged = merge_results([first, second])
+    assert len(merged) == 1 and merged[0]["metrics"]["mpjpe_g_mm"] == 2.0
