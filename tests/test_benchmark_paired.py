@@ -119,6 +119,8 @@ def test_compare_errors_name_the_file_and_the_remedy(tmp_path, capsys):
     only = _run(tmp_path, "only", ("base",), [r for r in _results() if r["variant"] != "new"])
     assert main(["compare", str(only), "--base", "base"]) == 2
     assert "nothing to compare" in capsys.readouterr().err
+    assert main(["compare", str(run), "--base", "base", "--variant", "base"]) == 2
+    assert "nothing to compare" in capsys.readouterr().err
 
 
 def test_a_later_run_replaces_an_earlier_one_on_the_same_clip():

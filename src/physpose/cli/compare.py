@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
         raise PhysposeError(f"variant(s) {', '.join(missing)} not in the results given",
                             path=", ".join(str(p) for p in args.results),
                             remedy=f"choose from: {', '.join(present)}")
-    variants = args.variant or [v for v in present if v != args.base]
+    variants = [v for v in (args.variant or present) if v != args.base]
     if not variants:
         raise PhysposeError(f"nothing to compare: the results hold only {args.base!r}",
                             remedy="add the results.json of a run with another variant")
