@@ -116,6 +116,9 @@ def test_compare_errors_name_the_file_and_the_remedy(tmp_path, capsys):
     junk.write_text("{not json")
     assert main(["compare", str(junk), "--base", "base"]) == 2
     assert "not a benchmark results file" in capsys.readouterr().err
+    junk.write_text(json.dumps({"results": [{"variant": "base"}]}))  # a record without its clip
+    assert main(["compare", str(junk), "--base", "base"]) == 2
+    assert "not a benchmark results file" in capsys.readouterr().err
     only = _run(tmp_path, "only", ("base",), [r for r in _results() if r["variant"] != "new"])
     assert main(["compare", str(only), "--base", "base"]) == 2
     assert "nothing to compare" in capsys.readouterr().err

@@ -86,7 +86,9 @@ def load_results(path: str | Path) -> dict:
     except (json.JSONDecodeError, UnicodeDecodeError) as err:
         raise PhysposeError(f"not a benchmark results file ({err})", path=path,
                             remedy="pass the results.json that `physpose benchmark` wrote") from err
-    if not isinstance(doc, dict) or not isinstance(doc.get("results"), list):
+    records = doc.get("results") if isinstance(doc, dict) else None
+    if not isinstance(records, list) or not all(
+            isinstance(r, dict) and {"kind", "clip", "variant"} <= r.keys() for r in records):
         raise PhysposeError("not a benchmark results file (no per-clip results)", path=path,
                             remedy="pass the results.json that `physpose benchmark` wrote")
     return doc

@@ -43,8 +43,10 @@ def run(args: argparse.Namespace) -> int:
                             remedy=f"choose from: {', '.join(present)}")
     variants = [v for v in (args.variant or present) if v != args.base]
     if not variants:
-        raise PhysposeError(f"nothing to compare: the results hold only {args.base!r}",
-                            remedy="add the results.json of a run with another variant")
+        raise PhysposeError(f"nothing to compare with {args.base!r}: no other variant chosen "
+                            "or in the results",
+                            remedy="name another variant with --variant, or add the results.json "
+                                   "of a run with one")
     configs = {json.dumps(doc.get("config", {}).get("material"), sort_keys=True) for doc in docs}
     if len(configs) > 1:
         print("physpose compare: note: the runs prepared their material differently (seed, "
