@@ -17,7 +17,7 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
-from physpose.benchmark.report import KIND_COLUMNS
+from physpose.benchmark.report import KIND_COLUMNS, record_figures
 from physpose.benchmark.scoring import TRUTH_ROW
 from physpose.errors import PhysposeError
 
@@ -28,7 +28,8 @@ PAIRED_KEYS: tuple[str, ...] = ("mpjpe_g_mm", "mpjpe_pa_mm", "mpjpe_2d_px",
 
 
 def _value(record: dict, key: str) -> float | None:
-    value = {**record.get("metrics", {}), **record.get("ground", {})}.get(key)
+    """The record's figure ``key`` when it is a finite number, else None."""
+    value = record_figures(record).get(key)
     if isinstance(value, (int, float)) and math.isfinite(value):
         return float(value)
     return None

@@ -41,7 +41,8 @@ KIND_TITLES = {"mocap": "Motion capture through the detector simulator",
                "video": "Real videos (no 3d ground truth)"}
 
 
-def _values(result: dict) -> dict[str, float]:
+def record_figures(result: dict) -> dict[str, float]:
+    """A per-clip record's figures: its metrics and its ground-plane figures together."""
     return {**result.get("metrics", {}), **result.get("ground", {})}
 
 
@@ -54,7 +55,7 @@ def aggregate(results: list[dict]) -> dict[str, dict[str, dict[str, float]]]:
     for (kind, variant), rows in groups.items():
         sums: dict[str, list[float]] = defaultdict(list)
         for r in rows:
-            for key, value in _values(r).items():
+            for key, value in record_figures(r).items():
                 if isinstance(value, (int, float)) and math.isfinite(value):
                     sums[key].append(float(value))
             for stage, seconds in r.get("time_s", {}).items():
@@ -114,7 +115,7 @@ def render_markdown(doc: dict) -> str:
         rows = []
         for r in doc["results"]:
             if r["kind"] == kind:
-                values = _values(r)
+                values = record_figures(r)
                 rows.append([r["clip"], r["variant"], str(r["frames"])]
                             + [_fmt(values.get(key), spec) for _, key, spec in cols]
                             + [_fmt(r["time_s"].get("variant"), "{:.2f}")])
