@@ -158,6 +158,7 @@ def make_reconstruction(num_frames: int = 30, physics: bool = True, qpos_kinemat
     base_meta = {"metrics": {"mpjpe_g_mm": 41.5, "foot_skate_pct": 3.2},
                  "dynamics": {"windows": windows}}
     assert np.allclose(joints_from_landmarks(lm_kin)[:, 5], j_kin[:, 5])
+    grf, cop, torques = synthetic_forces(model, num_frames)
     return Reconstruction(
         fps=FPS, joint_names=JOINT_NAMES, joints_kinematic=j_kin, camera_K=k,
         camera_T_world2cam=t, landmarks_kinematic=lm_kin,
@@ -167,7 +168,28 @@ def make_reconstruction(num_frames: int = 30, physics: bool = True, qpos_kinemat
         landmarks_physics=lm_phys if physics else None,
         body_mjcf=mjcf if (physics or qpos_kinematic) else None,
         qpos_kinematic=q_kin if qpos_kinematic else None,
+        grf_physics=grf if physics else None, cop_physics=cop if physics else None,
+        torques_physics=torques if physics else None,
         meta=base_meta if meta is None else meta)
+
+
+def synthetic_forces(model: mujoco.MjModel, num_frames: int
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(grf (T, 3, 3), cop (T, 2, 3), torques (T, 48)) of a walk: the weight passes from foot to
+    foot, the left foot is in the air (no centre of pressure) in the first quarter of each
+    cycle; the torques a smooth pattern."""
+    weight = float(model.body_subtreemass[0]) * 9.81
+    phase = 2 * np.pi * np.arange(num_frames) / 20.0
+    share = np.clip(0.5 + 0.7 * np.sin(phase), 0.0, 1.0)
+    grf = np.zeros((num_frames, 3, 3))
+    grf[:, 0, 2], grf[:, 1, 2] = weight * share, weight * (1.0 - share)
+    grf[:, :2, 0] = 0.1 * grf[:, :2, 2] * np.cos(phase)[:, None]
+    cop = np.zeros((num_frames, 2, 3))
+    cop[:, 0, 1], cop[:, 1, 1] = 0.1, -0.1
+    cop[:, :, 0] = 0.3 * np.arange(num_frames)[:, None] / FPS
+    cop[share <= 0.0, 0] = np.nan
+    torques = 20.0 * np.sin(phase[:, None] + np.arange(48)[None])
+    return grf, cop, torques
 
 
 def write_video(path: Path, num_frames: int, fps: float = 30.0) -> Path:

@@ -17,7 +17,8 @@ def results(tmp_path_factory):
 
 
 @pytest.mark.parametrize("fmt, name", [("bvh", "motion.bvh"), ("glb", "motion.glb"),
-                                       ("csv", "joints.csv"), ("json", "joints.json")])
+                                       ("csv", "joints.csv"), ("json", "joints.json"),
+                                       ("forces", "forces.csv")])
 def test_export_each_format(results, fmt, name, capsys):
     assert main(["export", str(results["physics"]), "--format", fmt]) == 0
     path = results["physics"] / name

@@ -60,6 +60,16 @@ def test_result_shapes_and_records(clip):
     # The standing body keeps its feet on the floor and stays near the true motion.
     assert np.abs(res.foot_heights).max() < 0.01
     assert np.linalg.norm(res.joints - fit.joints, axis=-1).mean() < 0.03
+    # Its forces: the floor carries it on its two soles, as Newton has it frame by frame (after
+    # the first frames, where the body settles onto the floor in a few steps).
+    assert res.grf.shape == (t, 3, 3) and res.cop.shape == (t, 2, 3)
+    assert res.torques.shape == (t, 48) and np.isfinite(res.grf).all()
+    weight = body.total_mass * 9.81
+    acc = np.diff(res.com[:, 2], 2) * fit.fps ** 2
+    np.testing.assert_allclose(res.grf[2:-1].sum(axis=1)[:, 2],
+                               body.total_mass * (acc[1:] + 9.81), atol=0.03 * weight)
+    assert np.abs(res.grf[:, 2]).max() < 1e-9 and np.isfinite(res.cop).all()
+    assert (np.abs(res.torques) <= body.torque_limit + 1e-6).all()
 
 
 def test_same_seed_same_result_and_another_seed_differs(clip):
@@ -177,6 +187,8 @@ def test_stretches_between_restarts_are_placed_on_the_estimate(clip, tmp_path):
         np.testing.assert_allclose(placed.qpos[a:b, :2] - raw.qpos[a:b, :2], np.tile(d, (b - a, 1)))
         np.testing.assert_allclose(placed.joints[a:b], raw.joints[a:b] + [*d, 0.0])
         np.testing.assert_array_equal(placed.qpos[a:b, 2:], raw.qpos[a:b, 2:])
+        np.testing.assert_allclose(placed.cop[a:b], raw.cop[a:b] + [*d, 0.0])  # under the feet
+    np.testing.assert_array_equal(placed.grf, raw.grf)
 
 
 @pytest.mark.parametrize("independent", [False, True])
@@ -201,14 +213,31 @@ def test_interrupted_run_resumes_to_the_uninterrupted_result(clip, tmp_path, mon
     resumed = run(clip, cfg, checkpoint_dir=tmp_path / "b")
     np.testing.assert_array_equal(resumed.qpos, whole.qpos)
     np.testing.assert_array_equal(resumed.ctrl, whole.ctrl)
+    for key in ("grf", "cop", "torques"):
+        np.testing.assert_array_equal(getattr(resumed, key), getattr(whole, key))
     # A changed config never reuses these windows.
     run(clip, dataclasses.replace(cfg, seed=3), checkpoint_dir=tmp_path / "b")
     assert len(list((tmp_path / "b").iterdir())) == 2
 
 
+def test_windows_checkpointed_without_forces_resume_with_nan_forces(clip, tmp_path):
+    whole = run(clip, checkpoint_dir=tmp_path)
+    folder = next(tmp_path.iterdir())
+    first = checkpoint.load_window(folder, 0)
+    arrays = {k: v for k, v in first[0].items() if not k.startswith("step_")}
+    checkpoint.save_window(folder, 0, arrays, first[1])  # as an earlier physpose wrote it
+    resumed = run(clip, checkpoint_dir=tmp_path)
+    np.testing.assert_array_equal(resumed.qpos, whole.qpos)
+    steps = len(arrays["ctrl"])
+    frames = resumed.windows[1]["frames"][0]
+    assert np.isnan(resumed.grf[:frames - 4]).all() and np.isfinite(resumed.grf[frames + 4:]).all()
+    assert np.isnan(resumed.torques[0]).all() and steps > 0
+
+
 def test_independent_windows_are_blended(clip):
     res = run(clip, dataclasses.replace(TINY, independent=True), checkpoints=False)
-    assert np.isfinite(res.qpos).all()
+    assert np.isfinite(res.qpos).all() and np.isfinite(res.grf).all()
+    assert len(res.ctrl) == int(round((len(res.qpos) - 1) / 25.0 / 0.005))
     np.testing.assert_allclose(np.linalg.norm(res.qpos[:, 3:7], axis=1), 1.0)
     wins = plan_windows(41, 25.0, 0.005, 0.4, 0.16, anchor_last=True)
     weights = blend_weights(wins, 41)

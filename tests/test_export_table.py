@@ -10,8 +10,9 @@ import pytest
 
 from physpose.errors import PhysposeError
 from physpose.export import export
-from physpose.export.table import CSV_COLUMNS
+from physpose.export.table import CSV_COLUMNS, forces_columns
 from physpose.reconstruction import Reconstruction
+from physpose.skeleton import DOF_NAMES
 from synthetic_result import save_result
 
 
@@ -58,6 +59,33 @@ def test_kinematic_only_result_exports_kinematic_rows(tmp_path):
     assert {r["motion"] for r in rows} == {"kinematic"}
     with pytest.raises(PhysposeError, match="no physics motion"):
         export(folder, "csv", motion="physics")
+
+
+def test_forces_table_round_trip(tmp_path):
+    folder = save_result(tmp_path, num_frames=20)
+    rec = Reconstruction.load(folder)
+    path = export(folder, "forces")
+    assert path == folder / "forces.csv"
+    with path.open() as f:
+        rows = list(csv.DictReader(f))
+    assert tuple(rows[0]) == forces_columns() and len(rows) == 20
+    assert len(forces_columns()) == 2 + 9 + 6 + 48
+    fz = np.array([[float(r["l_foot_fz_n"]), float(r["r_foot_fz_n"])] for r in rows])
+    assert np.abs(fz - rec.grf_physics[:, :2, 2]).max() < 1e-6
+    torque = np.array([float(r["r_knee_y_torque_nm"]) for r in rows])
+    assert np.abs(torque - rec.torques_physics[:, DOF_NAMES.index("r_knee_y")]).max() < 1e-6
+    # A foot in the air has no centre of pressure: empty cells, not a made-up point.
+    airborne = np.isnan(rec.cop_physics[:, 0, 0])
+    assert airborne.any() and all((r["l_cop_x_m"] == "") == a for r, a in zip(rows, airborne))
+    assert float(rows[3]["time"]) == pytest.approx(3 / rec.fps)
+
+
+def test_forces_need_a_physics_result(tmp_path):
+    folder = save_result(tmp_path, num_frames=3, physics=False)
+    with pytest.raises(PhysposeError, match="no simulated forces"):
+        export(folder, "forces")
+    with pytest.raises(PhysposeError, match="only the physics motion"):
+        export(save_result(tmp_path / "p", num_frames=3), "forces", motion="kinematic")
 
 
 @pytest.mark.parametrize("problem", ["missing", "empty", "format"])

@@ -9,7 +9,8 @@ import pytest
 
 import physpose.report as report
 from physpose.errors import PhysposeError
-from physpose.outputs import METRIC_LABELS, metrics_table, summarize, write_outputs
+from physpose.outputs import (DEFAULT_FORMATS, METRIC_LABELS, metrics_table, summarize,
+                              write_outputs)
 from physpose.reconstruction import Reconstruction
 from synthetic_result import make_reconstruction, save_result, write_video
 
@@ -66,8 +67,16 @@ def test_write_outputs_writes_every_file(tmp_path):
 
 def test_kinematic_only_result_has_no_physics_column(tmp_path):
     folder = save_result(tmp_path, num_frames=5, physics=False)
-    written = write_outputs(folder, formats=("csv",), report=False, overlay=False)
+    written = write_outputs(folder, formats=("csv", "forces"), report=False, overlay=False)
     assert set(json.loads(written["metrics"].read_text())) == {"kinematic"}
+    assert "forces" not in written  # nothing simulated, no forces table
+
+
+def test_default_exports_include_the_forces_of_a_physics_result(tmp_path):
+    folder = save_result(tmp_path, num_frames=5)
+    written = write_outputs(folder, report=False, overlay=False)
+    assert set(written) == {"metrics", *DEFAULT_FORMATS} and "forces" in DEFAULT_FORMATS
+    assert written["forces"] == folder / "forces.csv"
 
 
 def test_unknown_format_is_refused_before_writing(tmp_path):
@@ -80,3 +89,14 @@ def test_unknown_format_is_refused_before_writing(tmp_path):
 def test_missing_result_folder(tmp_path):
     with pytest.raises(PhysposeError, match="result folder not found"):
         summarize(tmp_path / "nope")
+
+
+def test_simulated_forces_round_trip_and_are_shape_checked(tmp_path):
+    rec = make_reconstruction(num_frames=6)
+    loaded = Reconstruction.load(rec.save(tmp_path / "reconstruction.npz"))
+    for key in ("grf_physics", "cop_physics", "torques_physics"):
+        np.testing.assert_array_equal(getattr(loaded, key), getattr(rec, key))
+    with pytest.raises(PhysposeError, match=r"grf_physics has shape \(6, 2, 3\)"):
+        rec.replace(grf_physics=np.zeros((6, 2, 3)))
+    with pytest.raises(PhysposeError, match="torques_physics"):
+        rec.replace(torques_physics=np.zeros((5, 48)))

@@ -10,7 +10,7 @@ import pytest
 import physpose.report as report
 from physpose.errors import PhysposeError
 from physpose.report import build_report
-from physpose.report.data import report_data, summary_rows, window_losses
+from physpose.report.data import grf_plot, report_data, summary_rows, window_losses
 from synthetic_result import make_reconstruction, save_result
 
 needs_bundle = pytest.mark.skipif(not report.BUNDLE.is_file(),
@@ -40,7 +40,7 @@ def test_report_is_self_contained_and_carries_both_motions(tmp_path):
     assert len(phys["joints"]) == 20 * 21 * 3
     assert len(phys["body_pos"]) == 20 * len(data["body"]["names"]) * 3
     assert len(phys["contacts"]) == 20 * 2 and len(phys["feet_xy"]) == 40
-    assert {p["id"] for p in data["plots"]} == {"feet", "com", "gap", "losses"}
+    assert {p["id"] for p in data["plots"]} == {"feet", "com", "gap", "grf", "losses"}
     for element in ('id="view"', 'id="play"', 'id="scrub"', 'id="frame"', 'value="kinematic"'):
         assert element in page
     assert "mpjpe_g_mm" in page and "41.5" in page
@@ -91,6 +91,27 @@ def test_window_losses_read_the_dynamics_stage_windows():
     assert spec["series"][0]["y"] == [0.2, 0.1]
     no_fps = window_losses({"dynamics": {"windows": windows}})
     assert no_fps["x"] == [0.0, 1.0] and no_fps["xlabel"] == "window"
+
+
+def test_ground_reaction_force_plot_in_body_weights_with_gaps():
+    import mujoco
+    import numpy as np
+
+    rec = make_reconstruction(num_frames=20)
+    weight = mujoco.MjModel.from_xml_string(rec.body_mjcf).body_subtreemass[0] * 9.81
+    grf = rec.grf_physics.copy()
+    grf[5:8] = np.nan  # windows resumed from checkpoints that hold no forces
+    plot = grf_plot(rec.replace(grf_physics=grf))
+    assert plot["ylabel"] == "body weights" and plot["cursor"]
+    left, right = plot["series"]  # the rest of the body touches nothing: no third line
+    assert left["name"] == "left foot" and right["name"] == "right foot"
+    assert left["y"][5:8] == [None, None, None]
+    assert left["y"][0] == pytest.approx(rec.grf_physics[0, 0, 2] / weight, abs=1e-4)
+    assert left["y"][0] + right["y"][0] == pytest.approx(1.0, abs=1e-3)
+    json.dumps(plot, allow_nan=False)  # the page's JSON holds no NaN
+    assert grf_plot(rec.replace(body_mjcf=None))["ylabel"] == "N"
+    assert grf_plot(rec.replace(grf_physics=np.full_like(grf, np.nan))) is None
+    assert grf_plot(make_reconstruction(num_frames=5, physics=False)) is None
 
 
 def test_restarts_are_marked_on_the_gap_plot_and_in_the_summary(tmp_path):

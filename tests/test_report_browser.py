@@ -74,7 +74,7 @@ def test_page_loads_without_console_errors(browser_page):
     page, errors = browser_page
     page.wait_for_timeout(300)
     assert errors == []
-    assert page.locator("#plots canvas").count() == 4
+    assert page.locator("#plots canvas").count() == 5  # feet, com, gap, grf, losses
 
 
 def test_canvas_shows_the_scene(browser_page):

@@ -36,7 +36,7 @@ METRIC_LABELS = {
     "penetration_max_mm": "penetration max (mm)",
     "jitter_mps2": "jitter (m/s^2)",
 }
-DEFAULT_FORMATS = ("bvh", "glb", "csv")
+DEFAULT_FORMATS = ("bvh", "glb", "csv", "forces")
 
 __all__ = ["summarize", "write_outputs", "metrics_table", "METRICS_FILE", "DEFAULT_FORMATS"]
 
@@ -108,7 +108,8 @@ def write_outputs(result_dir: str | Path, *, video: str | Path | None = None,
     """Write metrics.json, report.html, overlay.mp4 + overlay.png and the exports into the folder.
 
     video: the source video for the overlay (default: the one recorded in the result).
-    formats: any of physpose.export.FORMATS. Returns {name: path} of what was written, names
+    formats: any of physpose.export.FORMATS; 'forces' is skipped for a result without
+    simulated forces (a kinematic fit). Returns {name: path} of what was written, names
     'metrics', 'report', 'overlay', 'overlay_png' and the formats.
     """
     unknown = [f for f in formats if f not in FORMATS]
@@ -134,6 +135,8 @@ def write_outputs(result_dir: str | Path, *, video: str | Path | None = None,
         written["overlay_png"] = save_overlay_png(folder, rec.num_frames // 2,
                                                   folder / OVERLAY_PNG, video=video)
     for fmt in formats:
+        if fmt == "forces" and rec.grf_physics is None:
+            continue
         written[fmt] = export(folder, fmt, folder / DEFAULT_NAMES[fmt])
     return written
 

@@ -1,6 +1,9 @@
 """`Reconstruction`: the `reconstruction.npz` contract that benchmarks, exporters and tools read.
 
-See ../shared/DESIGN.md ("Contract"). Kinematic-only results leave the physics fields None.
+See ../shared/DESIGN.md ("Contract"). Beyond it: the kinematic estimate's simulator
+coordinates, a travelling camera's path, and the simulation's forces (ground reaction force
+per part, centres of pressure, servo torques). Kinematic-only results leave the physics fields
+None.
 """
 
 from __future__ import annotations
@@ -15,11 +18,14 @@ import numpy as np
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
 from physpose.npz_io import read_npz, write_npz
+from physpose.skeleton import NUM_DOF
 
 _REQUIRED = ("fps", "joint_names", "joints_kinematic", "camera_K", "camera_T_world2cam",
              "landmarks_kinematic", "keypoints2d")
 _OPTIONAL = ("joints_physics", "qpos_physics", "landmarks_physics", "body_mjcf", "qpos_kinematic",
-             "camera_travel_physics")
+             "camera_travel_physics", "grf_physics", "cop_physics", "torques_physics")
+# What grf_physics's second axis holds, and torques_physics's columns (skeleton.DOF_NAMES).
+GRF_PARTS = ("l_foot", "r_foot", "body")
 
 
 def restart_frames(windows: list[dict]) -> list[int]:
@@ -56,6 +62,13 @@ class Reconstruction:
     # (T, 3) m: where the camera travelled with the person, how far it had moved by each frame
     # in the physics world (camera_T_world2cam sees the physics moved back by it; `as_filmed`)
     camera_travel_physics: np.ndarray | None = None
+    # Forces of the simulation, each the mean over the steps within half a frame of the frame:
+    # (T, 3, 3) N, the floor's and obstacles' force on GRF_PARTS (left foot, right foot, the
+    # rest of the body), world frame; (T, 2, 3) m, the centre of pressure under each foot (NaN
+    # where it carries no weight); (T, 48) N m, the servo torque of each hinge (DOF_NAMES).
+    grf_physics: np.ndarray | None = None
+    cop_physics: np.ndarray | None = None
+    torques_physics: np.ndarray | None = None
     meta: dict = dataclasses.field(default_factory=dict)  # JSON-able extras (config, timings)
 
     def __post_init__(self) -> None:
@@ -66,6 +79,8 @@ class Reconstruction:
             "keypoints2d": (t, NUM_LANDMARKS, 3), "camera_K": (3, 3),
             "camera_T_world2cam": (4, 4), "joints_physics": (t, j, 3),
             "landmarks_physics": (t, NUM_LANDMARKS, 3), "camera_travel_physics": (t, 3),
+            "grf_physics": (t, len(GRF_PARTS), 3), "cop_physics": (t, 2, 3),
+            "torques_physics": (t, NUM_DOF),
         }
         for key, shape in checks.items():
             value = getattr(self, key)

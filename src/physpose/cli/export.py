@@ -13,11 +13,14 @@ _RESULT_HELP = "result folder written by `physpose reconstruct` (holds reconstru
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "export", help="export a result as BVH, glTF (.glb), CSV or JSON",
+        "export", help="export a result as BVH, glTF (.glb), CSV or JSON, or its forces as CSV",
         description="Export the motion of a result folder. bvh: a skeleton with the subject's "
                     "segment lengths (Y up, metres; loads in Blender). glb: the capsule body "
                     "animated over a ground plane (any glTF viewer). csv/json: world joint "
-                    "positions (z up, metres) per frame, for every motion the result holds.")
+                    "positions (z up, metres) per frame, for every motion the result holds. "
+                    "forces: the simulation's ground reaction forces on each foot and on the "
+                    "rest of the body (N), the centre of pressure under each foot (m) and the "
+                    "torque of every servo (N m), one row per frame (physics motion only).")
     p.add_argument("result", type=Path, metavar="RESULT_DIR", help=_RESULT_HELP)
     p.add_argument("--format", "-f", required=True, choices=FORMATS, dest="fmt",
                    help="file format")

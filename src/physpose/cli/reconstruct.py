@@ -28,7 +28,7 @@ from physpose.scene import SceneConfig, parse_obstacle, trampoline
 _OUTPUT_NAMES = {"metrics": "metrics", "report": "report (open in a browser)",
                  "overlay": "overlay video", "overlay_png": "overlay frame",
                  "bvh": "BVH (Blender)", "glb": "glTF binary", "csv": "joint table (CSV)",
-                 "json": "joint table (JSON)"}
+                 "json": "joint table (JSON)", "forces": "forces and torques (CSV)"}
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -39,7 +39,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "kinematic estimate, build a body sized to the person and optimise the motor\n"
                     "targets of its simulation. Writes into --out: reconstruction.npz,\n"
                     "config.json, metrics.json, report.html, overlay.mp4 + overlay.png and the\n"
-                    "exports (motion.bvh, motion.glb, joints.csv); prints the metrics, the files\n"
+                    "exports (motion.bvh, motion.glb, joints.csv, and forces.csv: the simulated\n"
+                    "ground reaction forces and joint torques); prints the metrics, the files\n"
                     "and the time per stage. An interrupted run resumes where it stopped.",
         epilog="examples:\n"
                "  physpose reconstruct walk.mp4 --out out/walk --height 1.75\n"

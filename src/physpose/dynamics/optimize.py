@@ -35,6 +35,7 @@ from tqdm import tqdm
 from physpose.body import Body
 from physpose.dynamics import checkpoint
 from physpose.dynamics.config import DynamicsConfig
+from physpose.dynamics.forces import STEP_KEYS, frame_forces, missing_steps, step_forces
 from physpose.dynamics.init import (Reference, geom_lowest, ground_motion, ground_state,
                                     initial_coefficients, inverse_dynamics,
                                     smooth_reference, smooth_sight_velocity)
@@ -200,7 +201,26 @@ def _record(win: Window, best: Best, initial: dict, evaluations: int, seconds: f
             **({"refine": initial["refine"]} if "refine" in initial else {})}
 
 
-_OUTPUT_KEYS = ("qpos", "joints", "landmarks", "com")
+_OUTPUT_KEYS = ("qpos", "joints", "landmarks", "com")  # per frame
+_STEP_OUTPUT_KEYS = ("ctrl", *STEP_KEYS)  # per simulation step
+
+
+def _step_outputs(setup: _Setup, best: Best, steps: int, timing: dict) -> dict:
+    """The servo targets of a window's first ``steps`` steps and the forces during them
+    (forces.py; their seconds added to timing["forces"])."""
+    start = time.perf_counter()
+    ctrl = best.ctrl[:steps]
+    forces = step_forces(setup.sim.model, setup.sim.body.foot_geom_ids, best.states[:len(ctrl)],
+                         ctrl)
+    timing["forces"] = timing.get("forces", 0.0) + time.perf_counter() - start
+    return {"ctrl": ctrl, **forces}
+
+
+def _with_forces(arrays: dict) -> dict:
+    """A checkpointed window's arrays, with NaN forces where it was written without them."""
+    if all(k in arrays for k in STEP_KEYS):
+        return arrays
+    return {**arrays, **missing_steps(len(arrays["ctrl"]))}
 
 
 def _handover_error(setup: _Setup, best: Best, win: Window, step_end: int) -> float:
@@ -343,18 +363,19 @@ def _stray_frame(setup: _Setup, win: Window, com: np.ndarray, cfg: DynamicsConfi
 
 def _cut_window(win: Window, arrays: dict, restart: Window) -> dict:
     """A window's outputs and controls kept only up to where ``restart`` begins."""
-    kept = restart.first - win.first
-    return dict(arrays, ctrl=arrays["ctrl"][:restart.start_step - win.start_step],
+    kept, kept_steps = restart.first - win.first, restart.start_step - win.start_step
+    return dict(arrays, **{k: arrays[k][:kept_steps] for k in _STEP_OUTPUT_KEYS},
                 **{k: arrays[k][:kept] for k in _OUTPUT_KEYS})
 
 
 def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, folder: Path | None,
-                    progress: bool, timing: dict) -> tuple[dict, np.ndarray, list[dict]]:
+                    progress: bool, timing: dict) -> tuple[dict, dict, list[dict]]:
     wins = list(setup.windows)  # a window that strays is cut short: the plan changes
     coefs = setup.coefs0.copy()
     state = _kinematic_state(setup, 0, cfg.ground_snap)
     parts: dict[str, list[np.ndarray]] = {k: [] for k in _OUTPUT_KEYS}
-    ctrl_parts, records = [], []
+    step_parts: dict[str, list[np.ndarray]] = {k: [] for k in _STEP_OUTPUT_KEYS}
+    records = []
     reset = False
     w = 0
     while w < len(wins):
@@ -374,16 +395,16 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
                 f"dynamics window {w + 1}/{len(wins)}", progress)
             coefs = coefs.copy()
             coefs[problem.free] = problem.coefficients(best.x[None])[0]
-            ctrl = best.ctrl[:step_end - win.start_step]
+            steps = _step_outputs(setup, best, step_end - win.start_step, timing)
             out = _frame_outputs(setup, best, win, np.arange(win.first, commit_end))
             next_state = best.states[step_end - win.start_step]
             record = _record(win, best, initial, evaluations, time.perf_counter() - start,
                              cfg.weights)
-            arrays = {"coefs": coefs, "next_state": next_state, "ctrl": ctrl, **out}
+            arrays = {"coefs": coefs, "next_state": next_state, **steps, **out}
             if folder is not None:
                 checkpoint.save_window(folder, w, arrays, record)
         else:
-            arrays, record = saved
+            arrays, record = _with_forces(saved[0]), saved[1]
         coefs, state = arrays["coefs"], arrays["next_state"]
         # A window that could not keep the body near the estimate hands on a restart from the
         # kinematic state instead of a fall in progress (a jump in the output, recorded):
@@ -406,19 +427,21 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
         record = dict(record, reset_after=bool(reset), cut_at=cut)
         for k in _OUTPUT_KEYS:
             parts[k].append(arrays[k])
-        ctrl_parts.append(arrays["ctrl"])
+        for k in step_parts:
+            step_parts[k].append(arrays[k])
         records.append(record)
         w += 1
-    return ({k: np.concatenate(v) for k, v in parts.items()}, np.concatenate(ctrl_parts),
-            records)
+    return ({k: np.concatenate(v) for k, v in parts.items()},
+            {k: np.concatenate(v) for k, v in step_parts.items()}, records)
 
 
 def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
                      folder: Path | None, progress: bool, timing: dict
-                     ) -> tuple[dict, np.ndarray, list[dict]]:
+                     ) -> tuple[dict, dict, list[dict]]:
     wins = setup.windows
     results: list[tuple[dict, dict] | None] = [
         checkpoint.load_window(folder, w) if folder is not None else None for w in range(len(wins))]
+    results = [None if r is None else (_with_forces(r[0]), r[1]) for r in results]
     todo = [w for w in range(len(wins)) if results[w] is None]
     for g in range(0, len(todo), cfg.parallel_windows):
         group = todo[g:g + cfg.parallel_windows]
@@ -438,9 +461,8 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
         for i, w in enumerate(group):
             win, best = wins[w], bests[i]
             out = _frame_outputs(setup, best, win, win.frames)
-            ctrl = best.ctrl
             record = _record(win, best, initials[i], counts[i], seconds, cfg.weights)
-            arrays = {"ctrl": ctrl, **out}
+            arrays = {**_step_outputs(setup, best, len(best.ctrl), timing), **out}
             if folder is not None:
                 checkpoint.save_window(folder, w, arrays, record)
             results[w] = (arrays, record)
@@ -461,10 +483,12 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
         joined[k] = acc
     quat = joined["qpos"][:, 3:7]
     joined["qpos"][:, 3:7] = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
-    ctrl = np.concatenate([
-        results[w][0]["ctrl"][:(wins[w + 1].start_step if w + 1 < len(wins) else wins[w].end_step)
-                              - wins[w].start_step] for w in range(len(wins))])
-    return joined, ctrl, [results[w][1] for w in range(len(wins))]
+    # The steps of each window up to the next one's start, one after another (not cross-faded).
+    kept = [(wins[w + 1].start_step if w + 1 < len(wins) else wins[w].end_step)
+            - wins[w].start_step for w in range(len(wins))]
+    steps = {k: np.concatenate([results[w][0][k][:kept[w]] for w in range(len(wins))])
+             for k in _STEP_OUTPUT_KEYS}
+    return joined, steps, [results[w][1] for w in range(len(wins))]
 
 
 def foot_heights(model: mujoco.MjModel, qpos: np.ndarray, foot_geoms: dict[str, int]
@@ -523,13 +547,15 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
             if checkpoints:
                 key = checkpoint.run_key(single.window_identity(), inputs)
                 folder = checkpoint.run_folder(key, checkpoint_dir)
-            outputs, ctrl, records = run(setup, simulator, single, folder, progress, timing)
-            runs.append((outputs, ctrl, records))
+            outputs, steps, records = run(setup, simulator, single, folder, progress, timing)
+            runs.append((outputs, steps, records))
             valid = all(r["valid"] for r in records)
             table.append({"seed": single.seed,
                           "loss": mean_window_loss(records) if valid else float("inf")})
     k = min(range(len(runs)), key=lambda j: table[j]["loss"])
-    outputs, ctrl, records = runs[k]
+    outputs, steps, records = runs[k]
+    positions = step_position(np.arange(kinematic_fit.num_frames), kinematic_fit.fps, sim.dt)
+    outputs = {**outputs, **frame_forces(steps, positions, 1.0 / (kinematic_fit.fps * sim.dt))}
     # The estimate's unexplained root force: the median over each window's steps, and per frame.
     residual = setup.root_residual
     records = [dict(r, reference_residual=float(np.median(residual[r["steps"][0]:
@@ -547,7 +573,8 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
     return PhysicsResult(
         fps=kinematic_fit.fps, qpos=outputs["qpos"], joints=outputs["joints"],
         landmarks=outputs["landmarks"], com=outputs["com"],
-        foot_heights=foot_heights(sim.model, outputs["qpos"], body.foot_geom_ids), ctrl=ctrl,
+        foot_heights=foot_heights(sim.model, outputs["qpos"], body.foot_geom_ids),
+        ctrl=steps["ctrl"], grf=outputs["grf"], cop=outputs["cop"], torques=outputs["torques"],
         windows=records, timings=timing, config=config.identity(), candidates=candidates,
         reference_residual=residual[setup.frame_steps], stretch_shifts=shifts,
         camera_travel=travel)

@@ -25,6 +25,12 @@ class PhysicsResult:
     weights, that the kinematic estimate needs and no ground contact explains (inverse dynamics
     of the smoothed estimate; 0 for a motion the body can make). Where it is large the
     simulated body cannot follow the estimate (docs/dynamics.md, "Consistency of the estimate").
+    grf (T, 3, 3) N: the force of the floor and any obstacle on the left foot, the right foot
+    and the rest of the body (forces.PARTS), world frame; cop (T, 2, 3) m: the centre of
+    pressure under each foot, NaN where it carries no weight; torques (T, 48) N m: the servo
+    torques, DOF_NAMES order. Each is the mean over the simulation steps within half a frame
+    of the frame (forces.py); NaN for windows resumed from a checkpoint written before
+    physpose recorded forces.
     `restarts`: the frames at which the motion restarts from the kinematic estimate.
     stretch_shifts (S, 2): the horizontal shift (m) given to each continuous stretch, split at
     the restarts (DynamicsConfig.place_stretches; empty when not placed).
@@ -48,6 +54,9 @@ class PhysicsResult:
     reference_residual: np.ndarray | None = None
     stretch_shifts: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
     camera_travel: np.ndarray | None = None
+    grf: np.ndarray | None = None
+    cop: np.ndarray | None = None
+    torques: np.ndarray | None = None
 
     @property
     def num_frames(self) -> int:
@@ -61,7 +70,9 @@ class PhysicsResult:
     def reconstruction_fields(self) -> dict[str, np.ndarray | None]:
         """The physics fields of a `Reconstruction` (physpose.reconstruction)."""
         return {"joints_physics": self.joints, "qpos_physics": self.qpos,
-                "landmarks_physics": self.landmarks, "camera_travel_physics": self.camera_travel}
+                "landmarks_physics": self.landmarks, "camera_travel_physics": self.camera_travel,
+                "grf_physics": self.grf, "cop_physics": self.cop,
+                "torques_physics": self.torques}
 
     def losses(self) -> dict[str, float]:
         """Final loss terms averaged over windows (unweighted), plus the weighted total."""

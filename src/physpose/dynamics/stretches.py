@@ -39,11 +39,13 @@ def translation_invariant(scene: SceneConfig) -> bool:
 def shift_stretches(outputs: dict[str, np.ndarray], restarts: list[int], shifts: np.ndarray
                     ) -> dict[str, np.ndarray]:
     """Copies of the per-frame outputs (qpos (T, 55) free-root first; joints, landmarks (T, N, 3);
-    com (T, 3)) with each stretch moved horizontally by its shift."""
+    com (T, 3); cop (T, 2, 3) where given; any others as they are) with each stretch moved
+    horizontally by its shift."""
     out = {k: np.array(v, copy=True) for k, v in outputs.items()}
     for (a, b), d in zip(stretch_bounds(len(out["qpos"]), restarts), shifts):
         out["qpos"][a:b, :2] += d
         out["com"][a:b, :2] += d
-        for key in ("joints", "landmarks"):
-            out[key][a:b, :, :2] += d
+        for key in ("joints", "landmarks", "cop"):
+            if key in out:
+                out[key][a:b, :, :2] += d
     return out

@@ -1,4 +1,4 @@
-"""Exports of a result folder: BVH, glTF binary, CSV and JSON joint tables."""
+"""Exports of a result folder: BVH, glTF binary, CSV and JSON joint tables, the forces table."""
 
 from __future__ import annotations
 
@@ -7,30 +7,36 @@ from pathlib import Path
 from physpose.errors import PhysposeError
 from physpose.export.bvh import write_bvh
 from physpose.export.gltf import write_glb
-from physpose.export.table import write_csv, write_json
+from physpose.export.table import write_csv, write_forces_csv, write_json
 from physpose.render.bodymotion import reconstruction_motion
 from physpose.render.result import available_motions, load_result, pick_motion
 
-FORMATS = ("bvh", "glb", "csv", "json")
+FORMATS = ("bvh", "glb", "csv", "json", "forces")
 # Default file name inside the result folder, per format.
 DEFAULT_NAMES = {"bvh": "motion.bvh", "glb": "motion.glb", "csv": "joints.csv",
-                 "json": "joints.json"}
+                 "json": "joints.json", "forces": "forces.csv"}
 
 __all__ = ["FORMATS", "export"]
 
 
 def export(result_dir: str | Path, fmt: str, out: str | Path | None = None,
            motion: str | None = None) -> Path:
-    """Export a result folder to `fmt` (bvh, glb, csv, json); returns the written file.
+    """Export a result folder to `fmt` (bvh, glb, csv, json, forces); returns the written file.
 
     motion: 'physics' or 'kinematic'. None means the physics motion if the result has one, else
-    the kinematic one, for bvh/glb; and every motion the result holds, for csv/json.
+    the kinematic one, for bvh/glb; and every motion the result holds, for csv/json. forces:
+    the physics motion's ground reaction forces and servo torques (no other motion has them).
     """
     if fmt not in FORMATS:
         raise PhysposeError(f"unknown export format {fmt!r}",
                             remedy=f"choose one of {', '.join(FORMATS)}")
     rec, folder = load_result(result_dir)
     out = Path(out) if out is not None else folder / DEFAULT_NAMES[fmt]
+    if fmt == "forces":
+        if motion == "kinematic":
+            raise PhysposeError("only the physics motion has forces", path=folder,
+                                remedy="export forces without --motion kinematic")
+        return write_forces_csv(rec, out)
     if fmt in ("csv", "json"):
         motions = available_motions(rec) if motion is None else (pick_motion(rec, motion, folder),)
         return (write_csv if fmt == "csv" else write_json)(rec, motions, out)

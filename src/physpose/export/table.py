@@ -1,4 +1,5 @@
-"""Joint positions as plain tables: CSV (one row per frame, motion and joint) and JSON."""
+"""Plain tables: joint positions as CSV (one row per frame, motion and joint) and JSON, and the
+simulation's forces as CSV (one row per frame)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,10 @@ from pathlib import Path
 
 import numpy as np
 
-from physpose.reconstruction import Reconstruction
+from physpose.errors import PhysposeError
+from physpose.reconstruction import GRF_PARTS, Reconstruction
 from physpose.render.result import joints_of
+from physpose.skeleton import DOF_NAMES
 
 CSV_COLUMNS = ("frame", "time", "motion", "joint", "x", "y", "z")
 _DECIMALS = 6  # metres: micrometre resolution
@@ -43,4 +46,35 @@ def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) 
         "motions": {m: np.round(joints_of(rec, m), _DECIMALS).tolist() for m in motions},
     }
     path.write_text(json.dumps(doc, separators=(",", ":")))
+    return path
+
+
+def forces_columns() -> tuple[str, ...]:
+    """Columns of the forces table: frame, time (s), the force on each of GRF_PARTS (N, world
+    axes), the centre of pressure under each foot (m), the servo torque of each hinge (N m)."""
+    grf = [f"{part}_f{axis}_n" for part in GRF_PARTS for axis in "xyz"]
+    cop = [f"{side}_cop_{axis}_m" for side in ("l", "r") for axis in "xyz"]
+    return ("frame", "time", *grf, *cop, *(f"{name}_torque_nm" for name in DOF_NAMES))
+
+
+def write_forces_csv(rec: Reconstruction, path: str | Path) -> Path:
+    """Write the physics motion's forces (reconstruction.npz's grf_physics, cop_physics,
+    torques_physics), one row per frame; a centre of pressure under a foot that carries no
+    weight, or a force not recorded, is an empty cell. Returns the path."""
+    if rec.grf_physics is None or rec.cop_physics is None or rec.torques_physics is None:
+        raise PhysposeError("this result holds no simulated forces",
+                            remedy="run `physpose reconstruct` (physpose fit writes no physics; "
+                                   "results from before physpose recorded forces need a re-run)")
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    values = np.concatenate([rec.grf_physics.reshape(rec.num_frames, -1),
+                             rec.cop_physics.reshape(rec.num_frames, -1),
+                             rec.torques_physics], axis=1)
+    times = np.arange(rec.num_frames) / rec.fps
+    with path.open("w", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(forces_columns())
+        for t, row in enumerate(values):
+            out.writerow((t, f"{times[t]:.6f}",
+                          *(f"{v:.{_DECIMALS}f}" if np.isfinite(v) else "" for v in row)))
     return path

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from physpose.diagnostics import warning_lines
-from physpose.reconstruction import Reconstruction
-from physpose.render.bodymotion import BodyMotion, GeomShape, reconstruction_motion
+from physpose.reconstruction import GRF_PARTS, Reconstruction
+from physpose.render.bodymotion import BodyMotion, GeomShape, load_model, reconstruction_motion
 from physpose.render.result import available_motions, joints_of
 from physpose.render.skeleton import (FEET, edge_indices, foot_contacts, foot_heights,
                                       lowest_foot_points)
@@ -24,6 +24,11 @@ _LOG_RANGE = 100.0  # plot window losses on a log axis when they span more than 
 
 def _r(a: np.ndarray) -> list:
     return np.round(np.asarray(a, dtype=float), _DECIMALS).reshape(-1).tolist()
+
+
+def _r_gaps(a: np.ndarray) -> list:
+    """As _r, with None (a gap in the plot) for values that are not finite."""
+    return [v if math.isfinite(v) else None for v in _r(a)]
 
 
 def _geom_dict(g: GeomShape) -> dict:
@@ -98,10 +103,36 @@ def _plots(rec: Reconstruction, bodies: dict[str, BodyMotion | None]) -> list[di
                       "xlabel": "time (s)", "ylabel": "cm", "x": time, "cursor": True,
                       "series": [{"name": "distance", "y": _r(100 * gap), "color": "#444"}],
                       "bands": bands})
+    forces = grf_plot(rec)
+    if forces is not None:
+        plots.append(forces)
     losses = window_losses(rec.meta, rec.fps)
     if losses is not None:
         plots.append(losses)
     return plots
+
+
+_GRF_LABELS = {"l_foot": "left foot", "r_foot": "right foot", "body": "rest of the body"}
+_GRF_COLORS = {"l_foot": "#2f6fd6", "r_foot": "#7fa8ea", "body": "#2a9d4b"}
+
+
+def grf_plot(rec: Reconstruction) -> dict | None:
+    """The simulation's vertical ground reaction force on each foot (and on the rest of the
+    body where anything else touches the floor or an obstacle), in body weights when the body
+    model is stored (else newtons); None without recorded forces."""
+    if rec.grf_physics is None or not np.isfinite(rec.grf_physics).any():
+        return None
+    weight = None
+    if rec.body_mjcf is not None:
+        weight = float(load_model(rec.body_mjcf).body_subtreemass[0]) * 9.81
+    vertical = rec.grf_physics[..., 2] / (weight or 1.0)
+    series = [{"name": _GRF_LABELS[part], "y": _r_gaps(vertical[:, k]),
+               "color": _GRF_COLORS[part]}
+              for k, part in enumerate(GRF_PARTS)
+              if part != "body" or np.nanmax(np.abs(vertical[:, k]), initial=0.0) > 0.01]
+    return {"id": "grf", "title": "Ground reaction force, vertical (simulated)",
+            "xlabel": "time (s)", "ylabel": "body weights" if weight else "N",
+            "x": _r(np.arange(rec.num_frames) / rec.fps), "series": series, "cursor": True}
 
 
 def window_losses(meta: dict, fps: float | None = None) -> dict | None:
