@@ -15,6 +15,7 @@ from physpose.cli.reconstruct import (camera_intrinsics, parse_formats, pipeline
 from physpose.dynamics import PRESETS
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.errors import PhysposeError
+from physpose.report.data import forces_summary
 from synthetic_result import make_reconstruction, save_result, write_video
 
 
@@ -178,6 +179,10 @@ def test_summary_lists_metrics_files_and_times(tmp_path, capsys):
     assert "float (% frames)" in out and "12.5" in out
     assert "report.html" in out and "reconstruction.npz" in out
     assert "dynamics 3.5 s" in out and "total 6.5 s" in out
+    # The simulated forces in one line.
+    line = forces_summary(make_reconstruction(num_frames=5))
+    assert line.startswith("peak vertical ground reaction force")
+    assert f"physics: {line} (forces.csv" in out
 
 
 def test_summary_says_where_the_physics_restarted_from_the_estimate(capsys):

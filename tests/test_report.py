@@ -10,7 +10,8 @@ import pytest
 import physpose.report as report
 from physpose.errors import PhysposeError
 from physpose.report import build_report
-from physpose.report.data import grf_plot, report_data, summary_rows, window_losses
+from physpose.report.data import (forces_summary, grf_plot, report_data, summary_rows,
+                                  window_losses)
 from synthetic_result import make_reconstruction, save_result
 
 needs_bundle = pytest.mark.skipif(not report.BUNDLE.is_file(),
@@ -112,6 +113,33 @@ def test_ground_reaction_force_plot_in_body_weights_with_gaps():
     assert grf_plot(rec.replace(body_mjcf=None))["ylabel"] == "N"
     assert grf_plot(rec.replace(grf_physics=np.full_like(grf, np.nan))) is None
     assert grf_plot(make_reconstruction(num_frames=5, physics=False)) is None
+
+
+def test_forces_summary_gives_the_peak_loads_and_the_servos_at_their_limits(tmp_path):
+    import numpy as np
+
+    from physpose.body import build_body
+    from physpose.shape import BodyShape
+    from physpose.skeleton import DOF_NAMES
+
+    body = build_body(BodyShape.from_height(1.7))
+    weight = body.total_mass * 9.81
+    rec = make_reconstruction(num_frames=10).replace(body_mjcf=body.xml)
+    grf = np.zeros((10, 3, 3))
+    grf[:, 0, 2], grf[4, 1, 2] = 0.5 * weight, 1.5 * weight
+    torques = np.zeros((10, 48))
+    knee = DOF_NAMES.index("r_knee_y")
+    torques[[2, 3], knee] = -body.torque_limit[knee]
+    line = forces_summary(rec.replace(grf_physics=grf, torques_physics=torques))
+    assert line.startswith("peak vertical ground reaction force 0.50 (left foot) and 1.50 "
+                           "(right foot) body weights")
+    assert line.endswith("a servo at its torque limit in 20 % of frames (most often r_knee_y)")
+    calm = forces_summary(rec.replace(grf_physics=grf, torques_physics=0.5 * torques))
+    assert calm.endswith("no servo at its torque limit")
+    assert dict(summary_rows(rec.replace(grf_physics=grf, torques_physics=torques),
+                             tmp_path))["physics forces"] == line
+    assert forces_summary(rec.replace(grf_physics=np.full_like(grf, np.nan))) is None
+    assert "physics forces" not in dict(summary_rows(rec.replace(grf_physics=None), tmp_path))
 
 
 def test_restarts_are_marked_on_the_gap_plot_and_in_the_summary(tmp_path):

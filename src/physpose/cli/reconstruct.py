@@ -23,6 +23,7 @@ from physpose.observations import Observations
 from physpose.outputs import DEFAULT_FORMATS, METRICS_FILE, metrics_table, write_outputs
 from physpose.pipeline import CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig
 from physpose.reconstruction import Reconstruction
+from physpose.report.data import forces_summary
 from physpose.scene import SceneConfig, parse_obstacle, trampoline
 
 _OUTPUT_NAMES = {"metrics": "metrics", "report": "report (open in a browser)",
@@ -337,6 +338,9 @@ def print_summary(recon: Reconstruction, out: Path, written: dict[str, Path],
         print(undetected)
     if recon.has_physics:
         print(restarts_line(recon))
+        forces = forces_summary(recon)
+        if forces is not None:
+            print(f"physics: {forces} (forces.csv; docs/dynamics.md, Forces and torques)")
     for line in diagnostics_lines(recon):
         print(f"warning: {line}")
     if metrics:

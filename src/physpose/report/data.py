@@ -9,6 +9,7 @@ import numpy as np
 
 from physpose.diagnostics import warning_lines
 from physpose.reconstruction import GRF_PARTS, Reconstruction
+from physpose.skeleton import DOF_NAMES, NUM_DOF
 from physpose.render.bodymotion import BodyMotion, GeomShape, load_model, reconstruction_motion
 from physpose.render.result import available_motions, joints_of
 from physpose.render.skeleton import (FEET, edge_indices, foot_contacts, foot_heights,
@@ -113,7 +114,39 @@ def _plots(rec: Reconstruction, bodies: dict[str, BodyMotion | None]) -> list[di
 
 
 _GRF_LABELS = {"l_foot": "left foot", "r_foot": "right foot", "body": "rest of the body"}
+SATURATED = 0.99  # a servo whose frame-mean torque is this share of its limit is saturated
 _GRF_COLORS = {"l_foot": "#2f6fd6", "r_foot": "#7fa8ea", "body": "#2a9d4b"}
+
+
+def _body_weight(rec: Reconstruction) -> float | None:
+    """N: the stored body model's mass times g; None without a body model."""
+    if rec.body_mjcf is None:
+        return None
+    return float(load_model(rec.body_mjcf).body_subtreemass[0]) * 9.81
+
+
+def forces_summary(rec: Reconstruction) -> str | None:
+    """One line on the simulation's forces: the peak vertical ground reaction force on each
+    foot (body weights) and the share of frames in which some servo works at its torque limit
+    (where the simulated body lacks the strength to follow); None without recorded forces or
+    body model."""
+    weight = _body_weight(rec)
+    if rec.grf_physics is None or rec.torques_physics is None or weight is None \
+            or not np.isfinite(rec.grf_physics).any():
+        return None
+    peaks = np.nanmax(rec.grf_physics[:, :2, 2], axis=0) / weight
+    line = (f"peak vertical ground reaction force {peaks[0]:.2f} (left foot) and "
+            f"{peaks[1]:.2f} (right foot) body weights")
+    model = load_model(rec.body_mjcf)
+    if model.nu < NUM_DOF or not model.actuator_forcelimited[:NUM_DOF].all():
+        return line  # a body model without physpose's torque-limited servos
+    limits = model.actuator_forcerange[:NUM_DOF, 1]
+    saturated = np.abs(rec.torques_physics) >= SATURATED * limits  # NaN compares False
+    if not saturated.any():
+        return line + "; no servo at its torque limit"
+    worst = DOF_NAMES[int(np.argmax(saturated.sum(axis=0)))]
+    return (line + f"; a servo at its torque limit in {100 * saturated.any(axis=1).mean():.0f} % "
+            f"of frames (most often {worst})")
 
 
 def grf_plot(rec: Reconstruction) -> dict | None:
@@ -122,9 +155,7 @@ def grf_plot(rec: Reconstruction) -> dict | None:
     model is stored (else newtons); None without recorded forces."""
     if rec.grf_physics is None or not np.isfinite(rec.grf_physics).any():
         return None
-    weight = None
-    if rec.body_mjcf is not None:
-        weight = float(load_model(rec.body_mjcf).body_subtreemass[0]) * 9.81
+    weight = _body_weight(rec)
     vertical = rec.grf_physics[..., 2] / (weight or 1.0)
     series = [{"name": _GRF_LABELS[part], "y": _r_gaps(vertical[:, k]),
                "color": _GRF_COLORS[part]}
@@ -204,5 +235,8 @@ def summary_rows(rec: Reconstruction, folder: Path) -> list[tuple[str, str]]:
         rows.append(("physics restarts", "none: one continuous simulation" if not frames else
                      f"{len(frames)}, where the motion jumps back to the estimate: "
                      + ", ".join(f"{f / rec.fps:.2f} s" for f in frames)))
+        forces = forces_summary(rec)
+        if forces is not None:
+            rows.append(("physics forces", forces))
     rows += [("warning", line) for line in warning_lines(rec.meta.get("diagnostics", {}), rec.fps)]
     return rows
