@@ -80,6 +80,23 @@ def test_invalid_windows_are_merged_and_every_warning_names_frames_and_a_remedy(
     assert diagnostics_lines(SimpleNamespace(fps=25.0, meta={})) == []
 
 
+def test_forces_missing_from_resumed_windows_are_reported():
+    import numpy as np
+
+    grf = np.ones((30, 3, 3))
+    grf[0:10] = np.nan  # windows from a checkpoint written before forces were recorded
+    grf[20:22, 1, 2] = np.nan
+    runs = diagnostics.unrecorded_force_runs(grf)
+    assert runs == [(0, 9), (20, 21)]
+    assert diagnostics.unrecorded_force_runs(np.ones((5, 3, 3))) == []
+    assert diagnostics.unrecorded_force_runs(None) == []
+    assert diagnostics.unrecorded_forces_message([], 25.0) is None
+    message = diagnostics.unrecorded_forces_message(runs, 25.0)
+    assert "0-9 (0.00-0.40 s), 20-21 (0.80-0.88 s)" in message and "--no-resume" in message
+    recon = SimpleNamespace(fps=25.0, meta={"diagnostics": {"unrecorded_forces": [[0, 9]]}})
+    assert diagnostics_lines(recon) == [diagnostics.unrecorded_forces_message([(0, 9)], 25.0)]
+
+
 def test_feet_out_of_the_picture_or_unseen_are_counted_and_warned_about():
     kp = _walker(40, 25.0)                     # feet in the image, seen
     valid = np.ones(40, bool)

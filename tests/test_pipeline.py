@@ -95,7 +95,11 @@ def test_reconstruct_writes_the_contract(tmp_path):
                                           "camera_motion": None, "person_jumps": [],
                                           "hidden_feet": 0.0, "raised": [],
                                           "supports": [], "seated": [], "seats": [],
-                                          "invalid_windows": []}
+                                          "invalid_windows": [], "unrecorded_forces": []}
+    # The simulated forces are in the contract's file: the floor carries the body's weight.
+    assert loaded.grf_physics.shape == (t, 3, 3) and loaded.torques_physics.shape == (t, 48)
+    weight = body.total_mass * 9.81
+    assert abs(loaded.grf_physics[:, :, 2].sum(axis=1).mean() / weight - 1.0) < 0.1
     resolved = json.loads((tmp_path / CONFIG_FILE).read_text())
     assert resolved["config"]["dynamics"]["iterations"] == cfg.dynamics.iterations
     assert any((tmp_path / "dynamics_windows").iterdir())

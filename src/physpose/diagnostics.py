@@ -16,6 +16,8 @@ somersaults off it, and back), and what the dynamics stage makes of them:
   under them is a guess too.
 - `invalid_window_runs`: the frames of dynamics windows in which no simulated sample stayed
   valid (the output there is the least bad fall, not a reconstruction).
+- `unrecorded_force_runs`: frames whose simulated forces are missing because their windows
+  were resumed from checkpoints an earlier physpose wrote without them.
 """
 
 from __future__ import annotations
@@ -122,6 +124,13 @@ def invalid_window_runs(windows: list[dict]) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in merged]
 
 
+def unrecorded_force_runs(grf: np.ndarray | None) -> list[tuple[int, int]]:
+    """(first, last) frames whose ground reaction forces (T, 3, 3) are not finite."""
+    if grf is None:
+        return []
+    return frame_runs(~np.isfinite(grf).all(axis=(1, 2)))
+
+
 def _at(frame: int, fps: float) -> str:
     return f"{frame} ({frame / fps:.2f} s)"
 
@@ -216,6 +225,17 @@ def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
             "a reconstruction. Use the kinematic motion there (joints_kinematic)")
 
 
+def unrecorded_forces_message(runs: list[tuple[int, int]], fps: float) -> str | None:
+    """A warning on `unrecorded_force_runs`, or None."""
+    if not runs:
+        return None
+    where = ", ".join(_span(a, b, fps) for a, b in runs)
+    return (f"physics: no simulated forces at frames {where}: their windows were resumed from "
+            "checkpoints an earlier physpose wrote without forces (the motion is the same). "
+            "To have them, run again without resuming (physpose reconstruct --no-resume; "
+            "physpose demo --no-cache)")
+
+
 def warning_lines(found: dict, fps: float) -> list[str]:
     """The warnings of a reconstruction's meta ``diagnostics`` (as the pipeline stores them)."""
     lines = [trimmed_message(found.get("trimmed"), found.get("observed_frames", 0), fps),
@@ -226,5 +246,7 @@ def warning_lines(found: dict, fps: float) -> list[str]:
                             supported=bool(found.get("supports"))),
              seated_message([tuple(r) for r in found.get("seated", [])],
                             tuple(parse_obstacle(b) for b in found.get("seats", [])), fps),
-             invalid_message([tuple(r) for r in found.get("invalid_windows", [])], fps)]
+             invalid_message([tuple(r) for r in found.get("invalid_windows", [])], fps),
+             unrecorded_forces_message([tuple(r) for r in found.get("unrecorded_forces", [])],
+                                       fps)]
     return [line for line in lines if line]

@@ -155,6 +155,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     lap("dynamics")
     invalid = diagnostics.invalid_window_runs(phys.windows)
     _warn(diagnostics.invalid_message(invalid, kin.fps))
+    unrecorded = diagnostics.unrecorded_force_runs(phys.grf)
+    _warn(diagnostics.unrecorded_forces_message(unrecorded, kin.fps))
     recon = kin.to_reconstruction(obs, body_mjcf=body.xml).replace(
         **phys.reconstruction_fields())
     meta = dict(recon.meta)
@@ -167,7 +169,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                              "supports": [[*b.center, *b.size] for b in boxes],
                              "seated": [list(r) for r in seated],
                              "seats": [b.spec() for b in seats],
-                             "invalid_windows": [list(r) for r in invalid]})
+                             "invalid_windows": [list(r) for r in invalid],
+                             "unrecorded_forces": [list(r) for r in unrecorded]})
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)
     resolved = {"stage": "reconstruct", "physpose_version": __version__,
