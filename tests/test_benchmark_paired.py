@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from physpose.benchmark.paired import merge_results, paired_differences
+from physpose.benchmark.paired import merge_results, paired_differences, run_labels
 from physpose.benchmark.report import render_markdown, write_results
 from physpose.benchmark.runner import BenchmarkConfig, results_document
 from physpose.benchmark.scoring import TRUTH_ROW
@@ -131,3 +131,21 @@ def test_a_later_run_replaces_an_earlier_one_on_the_same_clip():
     second = {"results": [_record("base", "a", mpjpe_g_mm=2.0)]}
     merged = merge_results([first, second])
     assert len(merged) == 1 and merged[0]["metrics"]["mpjpe_g_mm"] == 2.0
+
+
+def test_the_same_variant_in_two_runs_is_compared_by_run(tmp_path, capsys):
+    rows = _results()
+    old = _run(tmp_path, "old", ("base",), [r for r in rows if r["variant"] != "new"])
+    again = [dict(r, metrics=dict(r["metrics"], mpjpe_g_mm=r["metrics"]["mpjpe_g_mm"] + 1.0))
+             for r in rows if r["variant"] == "base"]
+    new = _run(tmp_path, "new", ("base",), again)
+    assert main(["compare", str(old), str(new), "--base", "base@old", "--by-run"]) == 0
+    assert "| base@new | 3 | 120 -> 121 (+1.0 +- 0.0) |" in capsys.readouterr().out
+    assert main(["compare", str(old), str(new), "--base", "base"]) == 2  # merged: one variant
+    assert "nothing to compare" in capsys.readouterr().err
+    assert main(["compare", str(old), str(new), "--base", "base", "--by-run"]) == 2
+    assert "choose from: base@old, base@new" in capsys.readouterr().err
+    assert run_labels([tmp_path / "a", tmp_path / "b" / "results.json", tmp_path / "x.json",
+                       tmp_path / "c" / "a"]) == ["a#1", "b", "x", "a#2"]
+    merged = merge_results([{"results": rows}], ["r"])
+    assert {r["variant"] for r in merged} == {TRUTH_ROW, "base@r", "new@r"}

@@ -95,11 +95,24 @@ def load_results(path: str | Path) -> dict:
     return doc
 
 
-def merge_results(docs: list[dict]) -> list[dict]:
+def merge_results(docs: list[dict], labels: list[str] | None = None) -> list[dict]:
     """The per-clip records of several results documents; where two have the same variant on
-    the same clip, the later document's record is kept."""
+    the same clip, the later document's record is kept. labels (one per document): name every
+    variant of a document ``variant@label`` instead (the truth's own row keeps its name), so
+    the same variant in two runs (two seeds, two versions) can be compared."""
     merged: dict[tuple[str, str, str], dict] = {}
-    for doc in docs:
+    for k, doc in enumerate(docs):
         for r in doc["results"]:
+            if labels is not None and r["variant"] != TRUTH_ROW:
+                r = dict(r, variant=f"{r['variant']}@{labels[k]}")
             merged[(r["kind"], r["clip"], r["variant"])] = r
     return list(merged.values())
+
+
+def run_labels(paths: list[Path]) -> list[str]:
+    """A short name per results file: its folder's name for a results.json (else its stem),
+    numbered where two would be the same."""
+    names = [p.name if p.is_dir() else (p.parent.name if p.name == "results.json" else p.stem)
+             for p in map(Path, paths)]
+    return [f"{n}#{names[:k].count(n) + 1}" if names.count(n) > 1 else n
+            for k, n in enumerate(names)]

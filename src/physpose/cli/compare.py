@@ -7,7 +7,8 @@ import json
 import sys
 from pathlib import Path
 
-from physpose.benchmark.paired import load_results, merge_results, paired_differences
+from physpose.benchmark.paired import (load_results, merge_results, paired_differences,
+                                       run_labels)
 from physpose.benchmark.report import render_paired
 from physpose.benchmark.scoring import TRUTH_ROW
 from physpose.errors import PhysposeError
@@ -20,13 +21,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "variant's run and an earlier run of the default on the same clips) and "
                     "print, per kind of material, each variant's per-clip differences from the "
                     "base variant: their mean and standard error. Where two files have the "
-                    "same variant on the same clip, the later file's record is used.")
+                    "same variant on the same clip, the later file's record is used, unless "
+                    "--by-run names each run's variants apart.")
     p.add_argument("results", nargs="+", type=Path, metavar="RESULTS",
                    help="results.json of a benchmark run, or its --out folder")
     p.add_argument("--base", required=True, metavar="NAME",
                    help="the variant the others are compared with, e.g. dynamics")
     p.add_argument("--variant", action="append", default=[], metavar="NAME",
                    help="compare only these variants (repeatable; default: all but the base)")
+    p.add_argument("--by-run", action="store_true",
+                   help="name every variant NAME@RUN (RUN: the results folder's name) so the "
+                        "same variant in two runs is compared, e.g. --base dynamics@old")
     p.add_argument("--out", type=Path, metavar="FILE",
                    help="also write the comparison: FILE.md (markdown) or FILE.json")
     p.set_defaults(func=run)
@@ -34,7 +39,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     docs = [load_results(path) for path in args.results]
-    results = merge_results(docs)
+    results = merge_results(docs, run_labels(args.results) if args.by_run else None)
     present = list(dict.fromkeys(r["variant"] for r in results if r["variant"] != TRUTH_ROW))
     missing = [v for v in [args.base, *args.variant] if v not in present]
     if missing:
