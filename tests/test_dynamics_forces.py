@@ -1,4 +1,4 @@
-"""Ground reaction forces, centres of pressure and servo torques read back from a simulation."""
+"""Ground reaction forces, centres of pressure and joint torques read back from a simulation."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ import pytest
 
 from physpose.body import build_body, standing_qpos
 from physpose.dynamics.forces import (MIN_NORMAL_FORCE, PARTS, STEP_KEYS, frame_forces,
-                                      missing_steps, step_forces)
+                                      joint_torques, missing_steps, step_forces)
 from physpose.dynamics.rollout import Simulator, make_state, sim_model
 from physpose.dynamics.synthetic import motion_targets, seated_qpos, sitting_scene
 from physpose.shape import BodyShape
-from physpose.skeleton import NUM_DOF, NV
+from physpose.skeleton import DOF_NAMES, NUM_DOF, NV
 
 G = 9.81
 
@@ -106,3 +106,36 @@ def test_frame_means_and_centres_of_pressure():
     assert MIN_NORMAL_FORCE > 0
     nan = frame_forces(missing_steps(steps), np.array([4.0]), 8.0)
     assert np.isnan(nan["grf"]).all() and np.isnan(nan["cop"]).all()
+
+
+def test_joint_torques_are_what_inverse_dynamics_gives_the_hinges(body):
+    """Hinge rows of M qacc + bias, less what the contacts push: the servos' torque (with their
+    damping) plus the joint-limit reactions."""
+    states, ctrl, sim = simulate(body, standing_qpos(body), motion_targets(body, "step", 1.0))
+    model, data = sim.model, mujoco.MjData(sim.model)
+    scratch, contact, inertial = np.zeros(model.nv), np.zeros(model.nv), np.zeros(model.nv)
+    for k in (10, 120, 150):
+        mujoco.mj_setState(model, data, states[k], mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        data.ctrl[:] = ctrl[k]
+        mujoco.mj_forward(model, data)
+        in_contact = data.efc_type >= int(mujoco.mjtConstraint.mjCNSTR_CONTACT_FRICTIONLESS)
+        mujoco.mj_mulJacTVec(model, data, contact, data.efc_force * in_contact)
+        mujoco.mj_mulM(model, data, inertial, data.qacc)
+        expected = (inertial + data.qfrc_bias - contact)[6:]
+        np.testing.assert_allclose(joint_torques(model, data, scratch), expected, atol=1e-6)
+        assert np.abs(data.qfrc_passive[6:]).max() > 0  # the servo damping is in them
+
+
+def test_a_joint_pushed_past_its_limit_is_held_by_the_limit(body):
+    data = mujoco.MjData(body.model)
+    q = standing_qpos(body)
+    knee = 7 + DOF_NAMES.index("l_knee_y")
+    lo, hi = body.model.jnt_range[body.model.dof_jntid[knee - 1]]
+    q[knee] = hi + 0.05  # bent past its range
+    data.qpos[:] = q
+    data.ctrl[:] = q[7:]  # the servo holds the pose: no servo torque
+    mujoco.mj_forward(body.model, data)
+    torques = joint_torques(body.model, data, np.zeros(body.model.nv))
+    k = DOF_NAMES.index("l_knee_y")
+    servo = data.qfrc_actuator[6 + k] + data.qfrc_passive[6 + k]
+    assert abs(servo) < 1e-6 and torques[k] < -1.0  # the limit pushes it back into range

@@ -115,7 +115,7 @@ def test_ground_reaction_force_plot_in_body_weights_with_gaps():
     assert grf_plot(make_reconstruction(num_frames=5, physics=False)) is None
 
 
-def test_forces_summary_gives_the_peak_loads_and_the_servos_at_their_limits(tmp_path):
+def test_forces_summary_gives_the_peak_loads_and_the_joints_at_their_limits(tmp_path):
     import numpy as np
 
     from physpose.body import build_body
@@ -133,9 +133,10 @@ def test_forces_summary_gives_the_peak_loads_and_the_servos_at_their_limits(tmp_
     line = forces_summary(rec.replace(grf_physics=grf, torques_physics=torques))
     assert line.startswith("peak vertical ground reaction force 0.50 (left foot) and 1.50 "
                            "(right foot) body weights")
-    assert line.endswith("a servo at its torque limit in 20 % of frames (most often r_knee_y)")
+    assert line.endswith("a joint at its servo's torque limit in 20 % of frames (most often "
+                         "r_knee_y)")
     calm = forces_summary(rec.replace(grf_physics=grf, torques_physics=0.5 * torques))
-    assert calm.endswith("no servo at its torque limit")
+    assert calm.endswith("no joint at its servo's torque limit")
     assert dict(summary_rows(rec.replace(grf_physics=grf, torques_physics=torques),
                              tmp_path))["physics forces"] == line
     assert forces_summary(rec.replace(grf_physics=np.full_like(grf, np.nan))) is None

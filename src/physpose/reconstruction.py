@@ -2,7 +2,7 @@
 
 See ../shared/DESIGN.md ("Contract"). Beyond it: the kinematic estimate's simulator
 coordinates, a travelling camera's path, and the simulation's forces (ground reaction force
-per part, centres of pressure, servo torques). Kinematic-only results leave the physics fields
+per part, centres of pressure, joint torques). Kinematic-only results leave the physics fields
 None.
 """
 
@@ -65,7 +65,8 @@ class Reconstruction:
     # Forces of the simulation, each the mean over the steps within half a frame of the frame:
     # (T, 3, 3) N, the floor's and obstacles' force on GRF_PARTS (left foot, right foot, the
     # rest of the body), world frame; (T, 2, 3) m, the centre of pressure under each foot (NaN
-    # where it carries no weight); (T, 48) N m, the servo torque of each hinge (DOF_NAMES).
+    # where it carries no weight); (T, 48) N m, the torque across each hinge (DOF_NAMES): its
+    # servo's, damping included, plus the joint-limit reaction (forces.joint_torques).
     grf_physics: np.ndarray | None = None
     cop_physics: np.ndarray | None = None
     torques_physics: np.ndarray | None = None

@@ -20,7 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "positions (z up, metres) per frame, for every motion the result holds. "
                     "forces: the simulation's ground reaction forces on each foot and on the "
                     "rest of the body (N), the centre of pressure under each foot (m) and the "
-                    "torque of every servo (N m), one row per frame (physics motion only).")
+                    "torque across every joint (N m), one row per frame (physics motion only).")
     p.add_argument("result", type=Path, metavar="RESULT_DIR", help=_RESULT_HELP)
     p.add_argument("--format", "-f", required=True, choices=FORMATS, dest="fmt",
                    help="file format")

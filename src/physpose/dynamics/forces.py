@@ -2,7 +2,7 @@
 
 The simulation already computes what a biomechanist would measure with force plates and
 inverse dynamics: the force the floor (and any obstacle) exerts on each foot and on the rest
-of the body, where under each foot it acts, and the torque each servo applies. They are read
+of the body, where under each foot it acts, and the torque across each joint. They are read
 back from the kept simulation, step by step: the state before a 200 Hz step and the servo
 targets applied during it give, through ``mj_forward``, the same contact and actuator forces
 the step integrated (over a step they balance the change of the body's momentum to within
@@ -44,7 +44,8 @@ def step_forces(model: mujoco.MjModel, foot_geoms: dict[str, int], states: np.nd
     step_force (S, 3, 3) N: force of the environment on each of PARTS (world frame, z up).
     step_pressure_moment (S, 2, 3) N m: per foot, the sum over its contacts of contact point
     times normal force; divided by step_normal (S, 2) N, the summed normal force, it is the
-    centre of pressure. step_torque (S, 48) N m: the servo torques (DOF_NAMES order).
+    centre of pressure. step_torque (S, 48) N m: the torque across each hinge (`joint_torques`,
+    DOF_NAMES order).
     Contacts of the body with itself are internal and left out.
     """
     steps = min(len(states), len(ctrl))
@@ -55,11 +56,12 @@ def step_forces(model: mujoco.MjModel, foot_geoms: dict[str, int], states: np.nd
     normal = np.zeros((steps, 2))
     torque = np.zeros((steps, NUM_DOF))
     wrench = np.zeros(6)
+    limits = np.zeros(model.nv)
     for k in range(steps):
         mujoco.mj_setState(model, data, states[k], _FULL)
         data.ctrl[:] = ctrl[k]
         mujoco.mj_forward(model, data)
-        torque[k] = data.actuator_force[:NUM_DOF]
+        torque[k] = joint_torques(model, data, limits)
         for i in range(data.ncon):
             contact = data.contact[i]
             p1, p2 = parts[contact.geom1], parts[contact.geom2]
@@ -75,6 +77,18 @@ def step_forces(model: mujoco.MjModel, foot_geoms: dict[str, int], states: np.nd
                 normal[k, part] += wrench[0]
     return {"step_force": force, "step_pressure_moment": moment, "step_normal": normal,
             "step_torque": torque}
+
+
+def joint_torques(model: mujoco.MjModel, data: mujoco.MjData, scratch: np.ndarray
+                  ) -> np.ndarray:
+    """(48,) N m: the torque across each hinge after mj_forward: the servo's (its clamped
+    stiffness part and its unclamped damping, which MuJoCo applies as a passive force) plus the
+    joint-limit reaction. What inverse dynamics of the motion, given the contact forces, would
+    attribute to the joint. scratch: (nv,) work array."""
+    limit = data.efc_force * (data.efc_type == int(mujoco.mjtConstraint.mjCNSTR_LIMIT_JOINT))
+    mujoco.mj_mulJacTVec(model, data, scratch, limit)
+    hinges = slice(model.nv - NUM_DOF, model.nv)
+    return data.qfrc_actuator[hinges] + data.qfrc_passive[hinges] + scratch[hinges]
 
 
 def missing_steps(steps: int) -> dict[str, np.ndarray]:

@@ -25,7 +25,7 @@ def export(result_dir: str | Path, fmt: str, out: str | Path | None = None,
 
     motion: 'physics' or 'kinematic'. None means the physics motion if the result has one, else
     the kinematic one, for bvh/glb; and every motion the result holds, for csv/json. forces:
-    the physics motion's ground reaction forces and servo torques (no other motion has them).
+    the physics motion's ground reaction forces and joint torques (no other motion has them).
     """
     if fmt not in FORMATS:
         raise PhysposeError(f"unknown export format {fmt!r}",

@@ -51,7 +51,7 @@ def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) 
 
 def forces_columns() -> tuple[str, ...]:
     """Columns of the forces table: frame, time (s), the force on each of GRF_PARTS (N, world
-    axes), the centre of pressure under each foot (m), the servo torque of each hinge (N m)."""
+    axes), the centre of pressure under each foot (m), the torque across each hinge (N m)."""
     grf = [f"{part}_f{axis}_n" for part in GRF_PARTS for axis in "xyz"]
     cop = [f"{side}_cop_{axis}_m" for side in ("l", "r") for axis in "xyz"]
     return ("frame", "time", *grf, *cop, *(f"{name}_torque_nm" for name in DOF_NAMES))

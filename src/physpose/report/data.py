@@ -114,7 +114,7 @@ def _plots(rec: Reconstruction, bodies: dict[str, BodyMotion | None]) -> list[di
 
 
 _GRF_LABELS = {"l_foot": "left foot", "r_foot": "right foot", "body": "rest of the body"}
-SATURATED = 0.99  # a servo whose frame-mean torque is this share of its limit is saturated
+SATURATED = 0.99  # a joint whose frame-mean torque is this share of its servo's limit is at it
 _GRF_COLORS = {"l_foot": "#2f6fd6", "r_foot": "#7fa8ea", "body": "#2a9d4b"}
 
 
@@ -127,9 +127,9 @@ def _body_weight(rec: Reconstruction) -> float | None:
 
 def forces_summary(rec: Reconstruction) -> str | None:
     """One line on the simulation's forces: the peak vertical ground reaction force on each
-    foot (body weights) and the share of frames in which some servo works at its torque limit
-    (where the simulated body lacks the strength to follow); None without recorded forces or
-    body model."""
+    foot (body weights) and the share of frames in which some joint's torque reaches its
+    servo's torque limit (where the simulated body works at the end of its strength); None
+    without recorded forces or body model."""
     weight = _body_weight(rec)
     if rec.grf_physics is None or rec.torques_physics is None or weight is None \
             or not np.isfinite(rec.grf_physics).any():
@@ -143,10 +143,10 @@ def forces_summary(rec: Reconstruction) -> str | None:
     limits = model.actuator_forcerange[:NUM_DOF, 1]
     saturated = np.abs(rec.torques_physics) >= SATURATED * limits  # NaN compares False
     if not saturated.any():
-        return line + "; no servo at its torque limit"
+        return line + "; no joint at its servo's torque limit"
     worst = DOF_NAMES[int(np.argmax(saturated.sum(axis=0)))]
-    return (line + f"; a servo at its torque limit in {100 * saturated.any(axis=1).mean():.0f} % "
-            f"of frames (most often {worst})")
+    return (line + f"; a joint at its servo's torque limit in "
+            f"{100 * saturated.any(axis=1).mean():.0f} % of frames (most often {worst})")
 
 
 def grf_plot(rec: Reconstruction) -> dict | None:
