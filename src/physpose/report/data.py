@@ -5,15 +5,16 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import mujoco
 import numpy as np
 
 from physpose.diagnostics import warning_lines
 from physpose.reconstruction import GRF_PARTS, Reconstruction
-from physpose.skeleton import DOF_NAMES, NUM_DOF
 from physpose.render.bodymotion import BodyMotion, GeomShape, load_model, reconstruction_motion
 from physpose.render.result import available_motions, joints_of
 from physpose.render.skeleton import (FEET, edge_indices, foot_contacts, foot_heights,
                                       lowest_foot_points)
+from physpose.skeleton import DOF_NAMES, NUM_DOF
 
 _DECIMALS = 4  # metres: 0.1 mm in the page's data
 # Plot colours per (motion, foot); the viewer uses the same blue/orange per motion.
@@ -114,15 +115,13 @@ def _plots(rec: Reconstruction, bodies: dict[str, BodyMotion | None]) -> list[di
 
 
 _GRF_LABELS = {"l_foot": "left foot", "r_foot": "right foot", "body": "rest of the body"}
-SATURATED = 0.99  # a joint whose frame-mean torque is this share of its servo's limit is at it
 _GRF_COLORS = {"l_foot": "#2f6fd6", "r_foot": "#7fa8ea", "body": "#2a9d4b"}
+SATURATED = 0.99  # a joint whose frame-mean torque is this share of its servo's limit is at it
 
 
-def _body_weight(rec: Reconstruction) -> float | None:
-    """N: the stored body model's mass times g; None without a body model."""
-    if rec.body_mjcf is None:
-        return None
-    return float(load_model(rec.body_mjcf).body_subtreemass[0]) * 9.81
+def _body_weight(model: mujoco.MjModel | None) -> float | None:
+    """N: a body model's mass times g; None without one."""
+    return None if model is None else float(model.body_subtreemass[0]) * 9.81
 
 
 def forces_summary(rec: Reconstruction) -> str | None:
@@ -130,14 +129,13 @@ def forces_summary(rec: Reconstruction) -> str | None:
     foot (body weights) and the share of frames in which some joint's torque reaches its
     servo's torque limit (where the simulated body works at the end of its strength); None
     without recorded forces or body model."""
-    weight = _body_weight(rec)
-    if rec.grf_physics is None or rec.torques_physics is None or weight is None \
+    if rec.grf_physics is None or rec.torques_physics is None or rec.body_mjcf is None \
             or not np.isfinite(rec.grf_physics).any():
         return None
-    peaks = np.nanmax(rec.grf_physics[:, :2, 2], axis=0) / weight
+    model = load_model(rec.body_mjcf)
+    peaks = np.nanmax(rec.grf_physics[:, :2, 2], axis=0) / _body_weight(model)
     line = (f"peak vertical ground reaction force {peaks[0]:.2f} (left foot) and "
             f"{peaks[1]:.2f} (right foot) body weights")
-    model = load_model(rec.body_mjcf)
     if model.nu < NUM_DOF or not model.actuator_forcelimited[:NUM_DOF].all():
         return line  # a body model without physpose's torque-limited servos
     limits = model.actuator_forcerange[:NUM_DOF, 1]
@@ -155,7 +153,7 @@ def grf_plot(rec: Reconstruction) -> dict | None:
     model is stored (else newtons); None without recorded forces."""
     if rec.grf_physics is None or not np.isfinite(rec.grf_physics).any():
         return None
-    weight = _body_weight(rec)
+    weight = _body_weight(None if rec.body_mjcf is None else load_model(rec.body_mjcf))
     vertical = rec.grf_physics[..., 2] / (weight or 1.0)
     series = [{"name": _GRF_LABELS[part], "y": _r_gaps(vertical[:, k]),
                "color": _GRF_COLORS[part]}
