@@ -27,8 +27,9 @@ class PhysicsResult:
     simulated body cannot follow the estimate (docs/dynamics.md, "Consistency of the estimate").
     grf (T, 3, 3) N: the force of the floor and any obstacle on the left foot, the right foot
     and the rest of the body (forces.PARTS), world frame; cop (T, 2, 3) m: the centre of
-    pressure under each foot, NaN where it carries no weight; torques (T, 48) N m: the servo
-    torques, DOF_NAMES order. Each is the mean over the simulation steps within half a frame
+    pressure under each foot, NaN where it carries no weight; torques (T, 48) N m: the torque
+    across each hinge (its servo's, damping included, plus the joint-limit reaction;
+    forces.joint_torques), DOF_NAMES order. Each is the mean over the simulation steps within half a frame
     of the frame (forces.py); NaN for windows resumed from a checkpoint written before
     physpose recorded forces.
     `restarts`: the frames at which the motion restarts from the kinematic estimate.
