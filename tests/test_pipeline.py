@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -98,8 +99,8 @@ def test_reconstruct_writes_the_contract(tmp_path):
                                           "invalid_windows": [], "unrecorded_forces": []}
     # The simulated forces are in the contract's file: the floor carries the body's weight.
     assert loaded.grf_physics.shape == (t, 3, 3) and loaded.torques_physics.shape == (t, 48)
-    weight = body.total_mass * 9.81
-    assert abs(loaded.grf_physics[:, :, 2].sum(axis=1).mean() / weight - 1.0) < 0.1
+    weight = mujoco.MjModel.from_xml_string(loaded.body_mjcf).body_subtreemass[0] * 9.81
+    assert abs(loaded.grf_physics[:, :, 2].sum(axis=1).mean() / weight - 1.0) < 0.05
     resolved = json.loads((tmp_path / CONFIG_FILE).read_text())
     assert resolved["config"]["dynamics"]["iterations"] == cfg.dynamics.iterations
     assert any((tmp_path / "dynamics_windows").iterdir())
