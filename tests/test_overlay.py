@@ -9,8 +9,8 @@ import pytest
 from physpose.errors import PhysposeError
 from physpose.reconstruction import Reconstruction
 from physpose.render.draw import project
-from physpose.render.overlay import (COLORS, RESTART_COLOR, OverlayConfig, render_overlay,
-                                     save_overlay_png)
+from physpose.render.overlay import (COLORS, FORCE_COLOR, RESTART_COLOR, OverlayConfig,
+                                     render_overlay, save_overlay_png)
 from synthetic_result import FPS, IMAGE_SIZE, make_reconstruction, write_video
 
 CFG = OverlayConfig(height=240)  # panel height = the synthetic video's height: scale 1
@@ -85,7 +85,8 @@ def test_bodies_are_drawn_where_the_camera_projects_them(tmp_path):
 def test_a_physics_restart_is_announced_on_the_frames_after_it(tmp_path):
     rec = make_reconstruction(num_frames=30, meta={"dynamics": {"restarts": [10]}})
     rec.save(tmp_path / "r" / "reconstruction.npz")
-    notice = (slice(36 + 20 * 3 + 4, 36 + 20 * 3 + 20), slice(8, 290))  # below the legend
+    rows = 4  # the legend: two motions, foot contact, ground force
+    notice = (slice(36 + 20 * rows + 4, 36 + 20 * rows + 20), slice(8, 290))  # below it
     red = np.array(RESTART_COLOR)
 
     def shown(t):
@@ -117,3 +118,32 @@ def test_bad_inputs_are_clear_errors(result_with_video, tmp_path):
         render_overlay(folder, out=tmp_path / "o.mp4", video=short, cfg=CFG)
     with pytest.raises(PhysposeError, match="outside the result"):
         save_overlay_png(folder, Reconstruction.load(folder).num_frames, tmp_path / "x.png")
+
+
+def test_the_ground_force_is_an_arrow_from_each_loaded_foot(tmp_path):
+    from physpose.render.overlay import FORCE_M_PER_BW, _scene, _view_camera
+
+    rec = make_reconstruction(num_frames=20)
+    rec.save(tmp_path / "f" / "reconstruction.npz")
+    rec.replace(grf_physics=None, cop_physics=None, torques_physics=None).save(
+        tmp_path / "n" / "reconstruction.npz")
+
+    def view(folder, t):
+        png = cv2.imread(str(save_overlay_png(tmp_path / folder, t, tmp_path / "f.png", cfg=CFG)))
+        return png[:, IMAGE_SIZE[0]:]
+
+    def green(image):
+        return np.abs(image.astype(int) - FORCE_COLOR).sum(axis=-1) < 40
+
+    # Frame 15: the left foot is in the air (no arrow), the right one carries the body weight.
+    scene = _scene(rec, IMAGE_SIZE)
+    arrows = scene.force_arrows[15]
+    assert np.isnan(arrows[0]).all()
+    weight = rec.grf_physics[15, :2, 2].sum()  # the synthetic walk's feet share its weight
+    np.testing.assert_allclose(arrows[1, 1] - arrows[1, 0],
+                               rec.grf_physics[15, 1] / weight * FORCE_M_PER_BW, atol=1e-9)
+    k, t_w2c = _view_camera(scene, 15, CFG)
+    (x, y), _ = project(k, t_w2c, arrows[1].mean(axis=0))  # the arrow's middle
+    image = view("f", 15)
+    assert green(image[round(y) - 2:round(y) + 3, round(x) - 2:round(x) + 3]).any()
+    assert not green(view("n", 15)).any()  # without forces, no arrow and no legend row

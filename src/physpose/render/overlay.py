@@ -1,5 +1,6 @@
 """Overlay video: the input frames with the kinematic and physics body projected on them, beside
-a 3d view of the body, the ground grid and the foot contacts from a second viewpoint.
+a 3d view of the body, the ground grid, the foot contacts and the simulated ground reaction
+force under each foot (an arrow from its centre of pressure) from a second viewpoint.
 
 The source frames are re-read at the analysis rate: meta['source'] names the video and
 meta['frame_indices'] (T,) the frame used for each analysed frame (else the frame nearest
@@ -22,9 +23,9 @@ from physpose.cache import atomic_path
 from physpose.errors import PhysposeError
 from physpose.reconstruction import Reconstruction
 from physpose.camera_motion import frame_cameras
-from physpose.render.bodymotion import BodyMotion, reconstruction_motion
+from physpose.render.bodymotion import BodyMotion, load_model, reconstruction_motion
 from physpose.render.draw import (draw_grid, draw_ground_disc, draw_skeleton, draw_solids,
-                                  geom_samples, look_at)
+                                  geom_samples, look_at, project)
 from physpose.render.result import available_motions, joints_of, load_result
 from physpose.render.skeleton import edge_indices, foot_contacts, lowest_foot_points
 
@@ -36,6 +37,8 @@ _VIEW_BACKGROUND = (245, 241, 238)
 _GRID_COLOR = (190, 184, 178)
 RESTART_COLOR = (43, 57, 192)  # BGR, red: the physics motion jumped back to the estimate
 RESTART_SHOWN_S = 0.4          # s the restart notice stays up (a jump is one frame)
+FORCE_COLOR = (60, 160, 40)    # BGR, green: the simulated ground reaction force
+FORCE_M_PER_BW = 0.5           # m of arrow per body weight of force
 
 
 @dataclass(frozen=True)
@@ -69,6 +72,7 @@ class _Scene:
     image_size: tuple[int, int]
     restarting: np.ndarray              # (T,) bool: within RESTART_SHOWN_S of a physics restart
     cameras: np.ndarray                 # (T, 4, 4) world -> each frame's camera (a turning one)
+    force_arrows: np.ndarray | None     # (T, 2, 2, 3) per foot: centre of pressure, arrow tip
 
 
 def _scene(rec: Reconstruction, image_size: tuple[int, int]) -> _Scene:
@@ -81,7 +85,20 @@ def _scene(rec: Reconstruction, image_size: tuple[int, int]) -> _Scene:
         contacts={m: foot_contacts(f[..., 2]) for m, f in feet.items()},
         feet_xy={m: f[..., :2] for m, f in feet.items()},
         edges=edge_indices(rec.joint_names), image_size=image_size,
-        restarting=_restarting(rec), cameras=_frame_cameras(rec))
+        restarting=_restarting(rec), cameras=_frame_cameras(rec),
+        force_arrows=_force_arrows(rec))
+
+
+def _force_arrows(rec: Reconstruction) -> np.ndarray | None:
+    """(T, 2, 2, 3) per foot, its centre of pressure and the tip of an arrow along the simulated
+    ground reaction force, FORCE_M_PER_BW long per body weight (NaN where the foot carries
+    nothing); None without recorded forces or a stored body model (for its weight)."""
+    if rec.grf_physics is None or rec.cop_physics is None or rec.body_mjcf is None:
+        return None
+    weight = float(load_model(rec.body_mjcf).body_subtreemass[0]) * 9.81
+    start = np.asarray(rec.cop_physics, dtype=float)
+    tip = start + np.asarray(rec.grf_physics, dtype=float)[:, :2] * (FORCE_M_PER_BW / weight)
+    return np.stack([start, tip], axis=2)
 
 
 def _frame_cameras(rec: Reconstruction) -> np.ndarray:
@@ -179,12 +196,22 @@ def _view_panel(scene: _Scene, t: int, cfg: OverlayConfig) -> np.ndarray:
             if scene.contacts[m][t, foot]:
                 draw_ground_disc(image, k, t_w2c, scene.feet_xy[m][t, foot], 0.08, CONTACT_COLOR)
     _draw_motions(scene, image, k, t_w2c, t, cfg.solids)
+    if scene.force_arrows is not None:
+        for start, tip in scene.force_arrows[t]:
+            if not (np.isfinite(start).all() and np.isfinite(tip).all()):
+                continue
+            px, front = project(k, t_w2c, np.stack([start, tip]))
+            if front.all():
+                a, b = (tuple(int(round(v)) for v in p) for p in px)
+                cv2.arrowedLine(image, a, b, FORCE_COLOR, 2, cv2.LINE_AA, tipLength=0.15)
     return image
 
 
 def _legend(image: np.ndarray, scene: _Scene, t: int) -> None:
     rows = [(m, COLORS[m]) for m in scene.motions] + [("foot contact", CONTACT_COLOR)]
-    cv2.rectangle(image, (6, 6), (196, 30 + 20 * len(rows)), (255, 255, 255), -1)
+    if scene.force_arrows is not None:
+        rows.append((f"ground force, {FORCE_M_PER_BW:g} m/BW", FORCE_COLOR))
+    cv2.rectangle(image, (6, 6), (226, 30 + 20 * len(rows)), (255, 255, 255), -1)
     cv2.putText(image, f"t = {t / scene.rec.fps:5.2f} s  frame {t + 1}", (12, 24),
                 cv2.FONT_HERSHEY_SIMPLEX, 0.45, (30, 30, 30), 1, cv2.LINE_AA)
     for i, (name, color) in enumerate(rows):
