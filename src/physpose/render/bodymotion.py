@@ -127,6 +127,12 @@ def load_model(mjcf: str) -> mujoco.MjModel:
                             remedy="re-run the reconstruction with this physpose version") from None
 
 
+def body_weight(model: mujoco.MjModel) -> float:
+    """N: the mass of every body in the model (the character; scenery is static) times the
+    model's gravity."""
+    return float(model.body_subtreemass[0]) * float(np.linalg.norm(model.opt.gravity))
+
+
 def body_tree(model: mujoco.MjModel) -> BodyTree:
     """The character (subtree of the first free-jointed body) and the static scene of a model."""
     free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]

@@ -23,7 +23,7 @@ from physpose.cache import atomic_path
 from physpose.errors import PhysposeError
 from physpose.reconstruction import Reconstruction
 from physpose.camera_motion import frame_cameras
-from physpose.render.bodymotion import BodyMotion, load_model, reconstruction_motion
+from physpose.render.bodymotion import BodyMotion, body_weight, load_model, reconstruction_motion
 from physpose.render.draw import (draw_grid, draw_ground_disc, draw_skeleton, draw_solids,
                                   geom_samples, look_at, project)
 from physpose.render.result import available_motions, joints_of, load_result
@@ -95,7 +95,7 @@ def _force_arrows(rec: Reconstruction) -> np.ndarray | None:
     nothing); None without recorded forces or a stored body model (for its weight)."""
     if rec.grf_physics is None or rec.cop_physics is None or rec.body_mjcf is None:
         return None
-    weight = float(load_model(rec.body_mjcf).body_subtreemass[0]) * 9.81
+    weight = body_weight(load_model(rec.body_mjcf))
     start = np.asarray(rec.cop_physics, dtype=float)
     tip = start + np.asarray(rec.grf_physics, dtype=float)[:, :2] * (FORCE_M_PER_BW / weight)
     return np.stack([start, tip], axis=2)

@@ -5,12 +5,12 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import mujoco
 import numpy as np
 
 from physpose.diagnostics import warning_lines
 from physpose.reconstruction import GRF_PARTS, Reconstruction
-from physpose.render.bodymotion import BodyMotion, GeomShape, load_model, reconstruction_motion
+from physpose.render.bodymotion import (BodyMotion, GeomShape, body_weight, load_model,
+                                        reconstruction_motion)
 from physpose.render.result import available_motions, joints_of
 from physpose.render.skeleton import (FEET, edge_indices, foot_contacts, foot_heights,
                                       lowest_foot_points)
@@ -119,11 +119,6 @@ _GRF_COLORS = {"l_foot": "#2f6fd6", "r_foot": "#7fa8ea", "body": "#2a9d4b"}
 SATURATED = 0.99  # a joint whose frame-mean torque is this share of its servo's limit is at it
 
 
-def _body_weight(model: mujoco.MjModel | None) -> float | None:
-    """N: a body model's mass times g; None without one."""
-    return None if model is None else float(model.body_subtreemass[0]) * 9.81
-
-
 def forces_summary(rec: Reconstruction) -> str | None:
     """One line on the simulation's forces: the peak vertical ground reaction force on each
     foot (body weights) and the share of frames in which some joint's torque reaches its
@@ -133,7 +128,7 @@ def forces_summary(rec: Reconstruction) -> str | None:
             or not np.isfinite(rec.grf_physics).any():
         return None
     model = load_model(rec.body_mjcf)
-    peaks = np.nanmax(rec.grf_physics[:, :2, 2], axis=0) / _body_weight(model)
+    peaks = np.nanmax(rec.grf_physics[:, :2, 2], axis=0) / body_weight(model)
     line = (f"peak vertical ground reaction force {peaks[0]:.2f} (left foot) and "
             f"{peaks[1]:.2f} (right foot) body weights")
     if model.nu < NUM_DOF or not model.actuator_forcelimited[:NUM_DOF].all():
@@ -153,7 +148,7 @@ def grf_plot(rec: Reconstruction) -> dict | None:
     model is stored (else newtons); None without recorded forces."""
     if rec.grf_physics is None or not np.isfinite(rec.grf_physics).any():
         return None
-    weight = _body_weight(None if rec.body_mjcf is None else load_model(rec.body_mjcf))
+    weight = None if rec.body_mjcf is None else body_weight(load_model(rec.body_mjcf))
     vertical = rec.grf_physics[..., 2] / (weight or 1.0)
     series = [{"name": _GRF_LABELS[part], "y": _r_gaps(vertical[:, k]),
                "color": _GRF_COLORS[part]}
