@@ -439,6 +439,10 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
                      folder: Path | None, progress: bool, timing: dict
                      ) -> tuple[dict, dict, list[dict]]:
     wins = setup.windows
+    # The steps each window contributes: up to the next one's start (the rest is cross-faded
+    # motion, and its controls and forces are not kept).
+    kept = [(wins[w + 1].start_step if w + 1 < len(wins) else wins[w].end_step)
+            - wins[w].start_step for w in range(len(wins))]
     results: list[tuple[dict, dict] | None] = [
         checkpoint.load_window(folder, w) if folder is not None else None for w in range(len(wins))]
     results = [None if r is None else (_with_forces(r[0]), r[1]) for r in results]
@@ -462,7 +466,7 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
             win, best = wins[w], bests[i]
             out = _frame_outputs(setup, best, win, win.frames)
             record = _record(win, best, initials[i], counts[i], seconds, cfg.weights)
-            arrays = {**_step_outputs(setup, best, len(best.ctrl), timing), **out}
+            arrays = {**_step_outputs(setup, best, kept[w], timing), **out}
             if folder is not None:
                 checkpoint.save_window(folder, w, arrays, record)
             results[w] = (arrays, record)
@@ -483,9 +487,7 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
         joined[k] = acc
     quat = joined["qpos"][:, 3:7]
     joined["qpos"][:, 3:7] = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
-    # The steps of each window up to the next one's start, one after another (not cross-faded).
-    kept = [(wins[w + 1].start_step if w + 1 < len(wins) else wins[w].end_step)
-            - wins[w].start_step for w in range(len(wins))]
+    # The windows' kept steps one after another (not cross-faded).
     steps = {k: np.concatenate([results[w][0][k][:kept[w]] for w in range(len(wins))])
              for k in _STEP_OUTPUT_KEYS}
     return joined, steps, [results[w][1] for w in range(len(wins))]
