@@ -24,8 +24,11 @@ from physpose.skeleton import NUM_DOF
 _FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
 MIN_NORMAL_FORCE = 1.0  # N; a foot carrying less over a frame has no centre of pressure
 
-# Per-step arrays a dynamics window keeps beside its servo targets (and checkpoints).
-STEP_KEYS = ("step_force", "step_pressure_moment", "step_normal", "step_torque")
+# Per-step arrays a dynamics window keeps beside its servo targets (and checkpoints), and the
+# shape of one step's entry.
+_STEP_SHAPES = {"step_force": (len(PARTS), 3), "step_pressure_moment": (2, 3),
+                "step_normal": (2,), "step_torque": (NUM_DOF,)}
+STEP_KEYS = tuple(_STEP_SHAPES)
 
 
 def geom_parts(model: mujoco.MjModel, foot_geoms: dict[str, int]) -> np.ndarray:
@@ -51,10 +54,9 @@ def step_forces(model: mujoco.MjModel, foot_geoms: dict[str, int], states: np.nd
     steps = min(len(states), len(ctrl))
     parts = geom_parts(model, foot_geoms)
     data = mujoco.MjData(model)
-    force = np.zeros((steps, len(PARTS), 3))
-    moment = np.zeros((steps, 2, 3))
-    normal = np.zeros((steps, 2))
-    torque = np.zeros((steps, NUM_DOF))
+    out = {k: np.zeros((steps, *shape)) for k, shape in _STEP_SHAPES.items()}
+    force, moment = out["step_force"], out["step_pressure_moment"]
+    normal, torque = out["step_normal"], out["step_torque"]
     wrench = np.zeros(6)
     limits = np.zeros(model.nv)
     for k in range(steps):
@@ -75,8 +77,7 @@ def step_forces(model: mujoco.MjModel, foot_geoms: dict[str, int], states: np.nd
             if part < 2:
                 moment[k, part] += contact.pos * wrench[0]
                 normal[k, part] += wrench[0]
-    return {"step_force": force, "step_pressure_moment": moment, "step_normal": normal,
-            "step_torque": torque}
+    return out
 
 
 def joint_torques(model: mujoco.MjModel, data: mujoco.MjData, scratch: np.ndarray
@@ -94,9 +95,7 @@ def joint_torques(model: mujoco.MjModel, data: mujoco.MjData, scratch: np.ndarra
 def missing_steps(steps: int) -> dict[str, np.ndarray]:
     """Per-step arrays for a window whose forces were not recorded (a checkpoint written
     before they were): NaN throughout."""
-    shapes = {"step_force": (len(PARTS), 3), "step_pressure_moment": (2, 3), "step_normal": (2,),
-              "step_torque": (NUM_DOF,)}
-    return {k: np.full((steps, *shape), np.nan) for k, shape in shapes.items()}
+    return {k: np.full((steps, *shape), np.nan) for k, shape in _STEP_SHAPES.items()}
 
 
 def frame_forces(steps: dict[str, np.ndarray], positions: np.ndarray, steps_per_frame: float
