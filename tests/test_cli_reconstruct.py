@@ -52,6 +52,8 @@ def _args(*argv: str):
     (["--weight", "15"], "names no objective term"),
     (["--weight", "pose"], "'pose' has no value"),
     (["--fps", "1000"], "outside"),
+    (["--slow-motion", "0"], "slow motion 0x is outside"),
+    (["--slow-motion", "-4"], "slow motion -4x is outside"),
     (["--person", "5000,10"], "--person 5000,10 is outside the"),
     (["--camera", "{missing}.json"], "camera file not found"),
     (["--camera", "{bad_json}"], "cannot read camera intrinsics"),
@@ -96,6 +98,12 @@ def test_flags_make_the_pipeline_config():
                                 "box:-0.35,0,0.225,0.45,0.45,0.45,30", "--obstacle",
                                 "box:1,1,0.1,0.4,0.4,0.2"))
     assert (cfg.observe.target_fps, cfg.observe.start, cfg.observe.end) == (20, 0.5, 2)
+    assert cfg.slow_motion == 1.0 and cfg.footage_observe() == cfg.observe
+    # Slow-motion footage: the analysis rate holds on the real clock, so the footage is
+    # sampled 4x more sparsely; the time range stays in the footage's seconds.
+    slow = pipeline_config(_args("v.mp4", "--out", "o", "--slow-motion", "4", "--end", "8"))
+    assert slow.slow_motion == 4.0
+    assert (slow.footage_observe().target_fps, slow.footage_observe().end) == (6.25, 8)
     assert pipeline_config(_args("v.mp4", "--out", "o", "--person", "12.5,40")
                            ).observe.person == (12.5, 40.0)
     assert cfg.dynamics.iterations == 2000

@@ -67,3 +67,18 @@ def test_reconstruction_roundtrip(tmp_path):
     back = Reconstruction.load(rec.save(tmp_path / "reconstruction.npz").parent)
     assert back.joint_names == JOINT_NAMES and back.meta == {"variant": "SO+GT"}
     assert not back.has_physics and back.joints().shape == (t, len(JOINT_NAMES), 3)
+
+
+def test_slow_motion_footage_is_put_on_the_real_clock():
+    obs = _obs(6, frame_indices=np.arange(6) * 4)
+    real = obs.on_real_clock(4.0)
+    assert real.fps == 100.0 and real.num_frames == 6
+    np.testing.assert_allclose(real.timestamps, np.arange(6) / 100.0)
+    # The frames still name the same images of the footage.
+    np.testing.assert_array_equal(real.frame_indices, obs.frame_indices)
+    np.testing.assert_array_equal(real.keypoints2d, obs.keypoints2d)
+    assert obs.on_real_clock(1.0) is obs
+    assert obs.on_real_clock(0.5).fps == 12.5  # sped-up footage
+    for bad in (0.0, -2.0, float("nan"), 1000.0):
+        with pytest.raises(PhysposeError, match="slow motion"):
+            obs.on_real_clock(bad)

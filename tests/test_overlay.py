@@ -147,3 +147,16 @@ def test_the_ground_force_is_an_arrow_from_each_loaded_foot(tmp_path):
     image = view("f", 15)
     assert green(image[round(y) - 2:round(y) + 3, round(x) - 2:round(x) + 3]).any()
     assert not green(view("n", 15)).any()  # without forces, no arrow and no legend row
+
+
+def test_the_overlay_of_slow_motion_footage_plays_at_the_footage_pace(result_with_video,
+                                                                        tmp_path):
+    folder, _, indices = result_with_video
+    rec = Reconstruction.load(folder / "reconstruction.npz")
+    slowed = rec.replace(fps=4 * rec.fps, meta={**rec.meta, "slow_motion": 4.0})
+    slowed.save(tmp_path / "slow" / "reconstruction.npz")
+    made = render_overlay(tmp_path / "slow", out=tmp_path / "o.mp4", cfg=CFG)
+    cap = cv2.VideoCapture(str(made.path))
+    # The result runs on the real clock (4x the frame rate); its video at the footage's rate.
+    assert cap.get(cv2.CAP_PROP_FPS) == pytest.approx(FPS)
+    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == len(indices)

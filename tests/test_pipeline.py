@@ -3,6 +3,7 @@ end-to-end run on simulated observations (slow)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import mujoco
@@ -108,3 +109,22 @@ def test_reconstruct_writes_the_contract(tmp_path):
     gap = np.linalg.norm(recon.joints_physics - recon.joints_kinematic, axis=-1).mean()
     assert gap < 0.1
     assert recon.qpos_physics[:, 2].min() > 0.5 * recon.qpos_kinematic[:, 2].min()
+
+
+@pytest.mark.slow
+def test_slow_motion_footage_is_reconstructed_on_the_real_clock(tmp_path):
+    body = build_body(BodyShape.from_height(1.75))
+    _, obs, _ = simulated_clip(body, "shift", seconds=0.8)
+    # The same motion filmed 4x slow: the footage's clock runs 4x behind the motion's.
+    footage = obs.replace(fps=obs.fps / 4, timestamps=obs.timestamps * 4)
+    cfg = dataclasses.replace(PipelineConfig.preset("fast"), slow_motion=4.0)
+    recon = reconstruct(footage, tmp_path, cfg, height=1.75, progress=False)
+    assert recon.fps == pytest.approx(obs.fps) and recon.slow_motion == 4.0
+    assert json.loads((tmp_path / CONFIG_FILE).read_text())["config"]["slow_motion"] == 4.0
+    # Under real gravity at the real pace the body follows the motion and stands on the floor.
+    gap = np.linalg.norm(recon.joints_physics - recon.joints_kinematic, axis=-1).mean()
+    assert gap < 0.1
+    weight = mujoco.MjModel.from_xml_string(recon.body_mjcf).body_subtreemass[0] * 9.81
+    assert abs(recon.grf_physics[:, :, 2].sum(axis=1).mean() / weight - 1.0) < 0.05
+    with pytest.raises(PhysposeError, match="slow motion"):
+        dataclasses.replace(cfg, slow_motion=0.0)

@@ -157,6 +157,15 @@ def test_restarts_are_marked_on_the_gap_plot_and_in_the_summary(tmp_path):
     assert "physics restarts" not in dict(summary_rows(kinematic, tmp_path))
 
 
+def test_slow_motion_footage_is_named_in_the_summary(tmp_path):
+    rec = make_reconstruction(num_frames=12)
+    assert "slow motion" not in dict(summary_rows(rec, tmp_path))
+    slowed = rec.replace(fps=4 * rec.fps, meta={**rec.meta, "slow_motion": 4.0})
+    rows = dict(summary_rows(slowed, tmp_path))
+    assert rows["slow motion"].startswith("the footage plays 4x slower than real time")
+    assert rows["frame rate"] == f"{4 * rec.fps:g} Hz"
+
+
 @needs_bundle
 def test_frames_without_a_detection_are_marked_and_listed(tmp_path):
     rec = make_reconstruction(num_frames=12)

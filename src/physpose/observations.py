@@ -18,6 +18,7 @@ from physpose.npz_io import read_npz, write_npz
 
 FORMAT_VERSION = 1
 CAMERA_MOTIONS = ("static", "turning", "moving")   # what `Observations.camera_motion` can say
+SLOW_MOTION_RANGE = (0.05, 50.0)  # footage seconds per real second that physpose accepts
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,6 +110,17 @@ class Observations:
             camera_motion=None if "camera_motion" not in d else str(d["camera_motion"]),
         )
 
+    def on_real_clock(self, slow_motion: float) -> "Observations":
+        """These observations timed as the filmed motion happened, where the footage plays
+        `slow_motion` times slower than real time (4 for 120 fps footage played at 30 fps;
+        below 1 for sped-up footage): the frame rate times it, the timestamps divided by it.
+        `frame_indices` still name the video's frames."""
+        check_slow_motion(slow_motion)
+        if slow_motion == 1.0:
+            return self
+        return self.replace(fps=self.fps * slow_motion,
+                            timestamps=np.asarray(self.timestamps) / slow_motion)
+
     def frames(self, start: int, stop: int) -> "Observations":
         """The frames [start, stop) alone (every per-frame array sliced)."""
         per_frame = ("timestamps", "keypoints2d", "detected", "interpolated", "world_landmarks",
@@ -138,6 +150,16 @@ def map_keypoints(keypoints2d: np.ndarray, homographies: np.ndarray, valid: np.n
     out = np.array(keypoints2d, dtype=float)
     out[..., :2] = np.where(valid[:, None, None], mapped[..., :2] / mapped[..., 2:], 0.0)
     return out
+
+
+def check_slow_motion(slow_motion: float) -> None:
+    """Raise PhysposeError unless `slow_motion` (footage seconds per real second) is usable."""
+    lo, hi = SLOW_MOTION_RANGE
+    if not (np.isfinite(slow_motion) and lo <= slow_motion <= hi):
+        raise PhysposeError(f"slow motion {slow_motion:g}x is outside {lo:g}-{hi:g}x",
+                            remedy="pass how many times slower than real time the footage "
+                                   "plays, e.g. --slow-motion 4 for 120 fps footage played at "
+                                   "30 fps (1: real time)")
 
 
 def validate(obs: Observations) -> None:

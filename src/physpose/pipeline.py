@@ -26,10 +26,11 @@ from physpose.dynamics.optimize import MIN_FRAMES
 from physpose.errors import PhysposeError
 from physpose.kinematics.config import KinematicConfig
 from physpose.keypoints_io import is_keypoints_file, load_keypoints
-from physpose.observations import Observations
+from physpose.observations import Observations, check_slow_motion
 from physpose.observe import ObserveConfig, observe
 from physpose.reconstruction import Reconstruction
 from physpose.scene import SceneConfig
+from physpose.video import MAX_TARGET_FPS, MIN_TARGET_FPS
 
 RECONSTRUCTION_FILE = "reconstruction.npz"
 CONFIG_FILE = "config.json"
@@ -43,6 +44,10 @@ class PipelineConfig:
     auto_support: where the estimate's feet stay above the floor for longer than a jump
     (diagnostics.raised_runs), add a box under them to the scene (supports.support_boxes);
     where the person sits (supports.seated_runs), a seat (supports.seat_boxes).
+    slow_motion: how many times slower than real time the footage plays (4 for 120 fps
+    footage played at 30 fps; below 1 for sped-up footage). Every stage after observing then
+    runs on the real clock: the kinematic fit, the simulation under real gravity, the output's
+    fps, speeds and forces. `observe.target_fps` is then the analysis rate in real time.
     """
 
     observe: ObserveConfig = field(default_factory=ObserveConfig)
@@ -51,6 +56,19 @@ class PipelineConfig:
     scene: SceneConfig = field(default_factory=SceneConfig)
     dynamics: DynamicsConfig = field(default_factory=lambda: DYNAMICS_PRESETS["fast"])
     auto_support: bool = True
+    slow_motion: float = 1.0
+
+    def __post_init__(self) -> None:
+        check_slow_motion(self.slow_motion)
+
+    def footage_observe(self) -> ObserveConfig:
+        """The observe settings on the footage's clock: slow-motion footage is sampled
+        `slow_motion` times more sparsely, so that the analysis rate holds in real time."""
+        if self.slow_motion == 1.0:
+            return self.observe
+        rate = min(max(self.observe.target_fps / self.slow_motion, MIN_TARGET_FPS),
+                   MAX_TARGET_FPS)
+        return dataclasses.replace(self.observe, target_fps=rate)
 
     @classmethod
     def preset(cls, name: str = "fast", **changes) -> PipelineConfig:
@@ -99,6 +117,9 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                 ) -> Reconstruction:
     """Run every stage and write ``reconstruction.npz`` and ``config.json`` into out_dir.
 
+    Observations given as they are (or read from a keypoints file) are on the footage's clock;
+    ``config.slow_motion`` scales them to the real one.
+
     height (m) and mass (kg) of the person, when known, fix the body's size and weight.
     resume=False discards the dynamics checkpoints of an earlier run in out_dir.
     """
@@ -121,7 +142,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
         timings[stage] = now - clock
         clock = now
 
-    obs = load_observations(video_or_observations, config.observe, progress)
+    obs = load_observations(video_or_observations, config.footage_observe(), progress)
+    obs = obs.on_real_clock(config.slow_motion)
     if obs.num_frames < MIN_FRAMES:
         raise PhysposeError(f"only {obs.num_frames} frame{'s' * (obs.num_frames != 1)} to "
                             f"reconstruct motion from (need at least {MIN_FRAMES})",
@@ -160,7 +182,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     recon = kin.to_reconstruction(obs, body_mjcf=body.xml).replace(
         **phys.reconstruction_fields())
     meta = dict(recon.meta)
-    meta.update(timings_s=timings, dynamics={**phys.meta(), "timings": phys.timings},
+    meta.update(slow_motion=config.slow_motion, timings_s=timings,
+                dynamics={**phys.meta(), "timings": phys.timings},
                 physpose_version=__version__,
                 diagnostics={"trimmed": trimmed, "observed_frames": observed_frames,
                              "camera_motion": obs.camera_motion,

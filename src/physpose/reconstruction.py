@@ -102,6 +102,12 @@ class Reconstruction:
         return self.joints_physics is not None
 
     @property
+    def slow_motion(self) -> float:
+        """How many times slower than real time the footage played (meta["slow_motion"];
+        1 where not recorded). `fps` and every time, speed and force are on the real clock."""
+        return float(self.meta.get("slow_motion") or 1.0)
+
+    @property
     def restarts(self) -> list[int]:
         """Frames at which the physics motion restarts from the kinematic estimate (it jumps
         there), from meta["dynamics"]; empty without physics or restarts."""

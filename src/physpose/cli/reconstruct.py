@@ -23,7 +23,7 @@ from physpose.observations import Observations
 from physpose.outputs import DEFAULT_FORMATS, METRICS_FILE, metrics_table, write_outputs
 from physpose.pipeline import CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig
 from physpose.reconstruction import Reconstruction
-from physpose.report.data import forces_summary
+from physpose.report.data import forces_summary, slow_motion_note
 from physpose.scene import SceneConfig, parse_obstacle, trampoline
 
 _OUTPUT_NAMES = {"metrics": "metrics", "report": "report (open in a browser)",
@@ -97,7 +97,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     g = p.add_argument_group("the person and the video")
     g.add_argument("--height", type=float, metavar="M", help="the person's standing height, m")
     g.add_argument("--mass", type=float, metavar="KG", help="the person's mass, kg")
-    g.add_argument("--fps", type=float, help="analysis frame rate, Hz (default 25)")
+    g.add_argument("--fps", type=float, help="analysis frame rate, Hz (default 25; in real "
+                                             "time with --slow-motion)")
+    g.add_argument("--slow-motion", type=float, metavar="X",
+                   help="the footage plays X times slower than real time, e.g. 4 for 120 fps "
+                        "footage played at 30 fps (below 1: sped up). The body is then "
+                        "simulated on the real clock, under real gravity; the output's frame "
+                        "rate, speeds and forces are real-time. --start/--end stay seconds "
+                        "into the footage (default 1)")
     g.add_argument("--start", type=float, metavar="S", help="first second analysed (default 0)")
     g.add_argument("--end", type=float, metavar="S",
                    help="analysis stops before this second (default: end of the video)")
@@ -223,7 +230,8 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))
     return dataclasses.replace(config, observe=observe, dynamics=dynamics,
-                               scene=scene_config(args), auto_support=args.auto_support)
+                               scene=scene_config(args), auto_support=args.auto_support,
+                               slow_motion=1.0 if args.slow_motion is None else args.slow_motion)
 
 
 def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:
@@ -240,8 +248,8 @@ def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:
                                 path=video, remedy="drop them, or cut the keypoints file")
         return None
     info = videolib.probe(video)
-    videolib.plan_frames(info, config.observe.target_fps, config.observe.start,
-                         config.observe.end)
+    observe = config.footage_observe()
+    videolib.plan_frames(info, observe.target_fps, observe.start, observe.end)
     return info.image_size
 
 
@@ -333,6 +341,8 @@ def print_summary(recon: Reconstruction, out: Path, written: dict[str, Path],
     motions = "physics and kinematic motion" if recon.has_physics else "kinematic motion only"
     print(f"\n{recon.num_frames} frames at {recon.fps:g} fps ({recon.num_frames / recon.fps:.2f}"
           f" s), {motions}")
+    if recon.slow_motion != 1.0:
+        print(slow_motion_note(recon))
     undetected = undetected_line(recon)
     if undetected:
         print(undetected)
@@ -362,7 +372,7 @@ def load_input(video: Path, config: PipelineConfig, camera_K: np.ndarray | None
     from physpose.pipeline import load_observations  # noqa: PLC0415
 
     print(f"observe: {video}", file=sys.stderr, flush=True)
-    obs = load_observations(video, config.observe, progress=True)
+    obs = load_observations(video, config.footage_observe(), progress=True)
     return obs if camera_K is None else dataclasses.replace(obs, camera_K=camera_K)
 
 

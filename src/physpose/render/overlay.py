@@ -247,7 +247,8 @@ def _frames(rec: Reconstruction, video: str | Path | None) -> tuple[Iterator, tu
     info = videolib.probe(path)
     indices = rec.meta.get("frame_indices")
     if indices is None or len(indices) != rec.num_frames:
-        times = rec.meta.get("start", 0.0) + np.arange(rec.num_frames) / rec.fps
+        # Seconds into the footage (the result's own clock is the real one).
+        times = rec.meta.get("start", 0.0) + np.arange(rec.num_frames) * rec.slow_motion / rec.fps
         indices = np.floor(times * info.fps + 0.5)
     indices = np.asarray(indices, dtype=np.int64)
     if indices.min() < 0 or indices.max() >= info.frame_count:
@@ -286,7 +287,9 @@ def render_overlay(result_dir: str | Path, out: str | Path | None = None,
                           disable=not progress):
                 image = compose_frame(scene, next(frames), t, cfg)
                 if writer is None:
-                    writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), rec.fps,
+                    # Slow-motion footage: the overlay plays at the footage's pace.
+                    writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"),
+                                             rec.fps / rec.slow_motion,
                                              (image.shape[1], image.shape[0]))
                     if not writer.isOpened():
                         raise PhysposeError("OpenCV cannot write an mp4 video here", path=out,

@@ -208,12 +208,20 @@ def metric_rows(rec: Reconstruction, metrics: dict | None) -> tuple[list, list]:
     return ["value"], [[k, v] for k, v in metrics.items()]
 
 
+def slow_motion_note(rec: Reconstruction) -> str:
+    """What a slow-motion (or sped-up) footage's factor means for the result's times."""
+    return (f"the footage plays {rec.slow_motion:g}x slower than real time; the frame rate, "
+            "times, speeds and forces here are on the real clock")
+
+
 def summary_rows(rec: Reconstruction, folder: Path) -> list[tuple[str, str]]:
     """Facts about the result shown above the metrics."""
     rows = [("result", str(folder)), ("frames", str(rec.num_frames)),
             ("frame rate", f"{rec.fps:g} Hz"),
             ("duration", f"{rec.num_frames / rec.fps:.2f} s"),
             ("motions", ", ".join(available_motions(rec)))]
+    if rec.slow_motion != 1.0:
+        rows.insert(4, ("slow motion", slow_motion_note(rec)))
     source = rec.meta.get("source")
     if source:
         rows.insert(1, ("video", str(source)))
