@@ -124,3 +124,40 @@ def test_the_seated_warning_names_frames_and_the_seat():
     recon = SimpleNamespace(fps=25.0, meta={"diagnostics": {
         "seated": [[36, 75, 0.38]], "seats": [seat.spec()]}})
     assert "puts a seat there (box:-0.10" in diagnostics_lines(recon)[0]
+
+
+def _stepping(period: float, seconds: float = 6.0, fps: float = 25.0, seed: int = 0):
+    """(keypoints2d, valid) of a person stepping on the spot in the image: the ankles swing
+    fore and aft in antiphase with the given period (s), torso 100 px, 2 px detector noise."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(seconds * fps)) / fps
+    kp = np.zeros((len(t), 33, 3))
+    kp[..., 2] = 0.9
+    kp[:, [11, 12], :2] = [[290, 100], [310, 100]]
+    kp[:, [23, 24], :2] = [[292, 200], [308, 200]]
+    swing = 40 * np.sin(2 * np.pi * t / period) if period else np.cumsum(rng.normal(0, 8, len(t)))
+    kp[:, 27, :2] = np.stack([300 + swing, np.full_like(t, 380)], 1)
+    kp[:, 28, :2] = np.stack([300 - swing, np.full_like(t, 380)], 1)
+    kp[..., :2] += rng.normal(0, 2, kp[..., :2].shape)
+    return kp, np.ones(len(t), bool)
+
+
+def test_a_stride_too_slow_for_real_time_hints_at_slow_motion():
+    fps = 25.0
+    walk = diagnostics.stride_period(*_stepping(1.1), fps)
+    assert walk == pytest.approx(1.1, abs=0.05)
+    assert diagnostics.slow_stride_message(walk) is None
+    slowed = diagnostics.stride_period(*_stepping(2.8), fps)  # a run filmed ~4x slow
+    assert slowed == pytest.approx(2.8, abs=0.05)
+    hint = diagnostics.slow_stride_message(slowed)
+    assert "every 2.8 s" in hint and "--slow-motion 2.3 to 4.0" in hint
+    # Declared 2x, the real stride is still 1.4 s: no hint; declared 1.2x it would be 2.3 s.
+    assert diagnostics.slow_stride_message(slowed / 2, 2.0) is None
+    assert "declared 1.2x" in diagnostics.slow_stride_message(slowed / 1.2, 1.2)
+    # No stride where the feet do not alternate periodically, or too few strides are seen.
+    assert diagnostics.stride_period(*_stepping(0.0), fps) is None
+    assert diagnostics.stride_period(*_stepping(2.8, seconds=3.5), fps) is None
+    kp, valid = _stepping(2.8)
+    assert diagnostics.stride_period(kp, valid & (np.arange(len(valid)) % 3 > 0), fps) is None
+    found = {"stride_period": slowed, "slow_motion": 1.0}
+    assert any("slow motion" in line for line in diagnostics.warning_lines(found, fps))

@@ -18,6 +18,10 @@ somersaults off it, and back), and what the dynamics stage makes of them:
   valid (the output there is the least bad fall, not a reconstruction).
 - `unrecorded_force_runs`: frames whose simulated forces are missing because their windows
   were resumed from checkpoints an earlier physpose wrote without them.
+- `stride_period`: how long the feet take to alternate when the person walks or runs. A
+  stride far slower than people walk or run hints at slow-motion footage, which the physics
+  must be told of (`--slow-motion`): under real gravity it cannot move as slowly as the person
+  seems to.
 """
 
 from __future__ import annotations
@@ -35,6 +39,16 @@ JUMP_SPEED = 6.0           # ... plus this many box diagonals per second between
 RAISED_HEIGHT = 0.3        # m, lowest sole point above the floor ...
 RAISED_SECONDS = 1.0       # ... for at least this long (no jump keeps both feet up that long)
 HIDDEN_FEET_SHARE = 0.3    # warn when no foot landmark is seen in this share of the frames
+# A stride (left foot forward to left foot forward again) takes about 1.0-1.2 s walking and
+# 0.6-0.8 s running; one this slow on the real clock hints at undeclared slow motion.
+SLOW_STRIDE_S = 2.0
+STRIDE_S = (0.7, 1.2)       # s, the stride a hint's suggested slow-motion factor assumes
+STRIDE_REGULARITY = 0.8     # autocorrelation a periodic stride reaches at one period
+STRIDE_AMPLITUDE = 0.15     # torso lengths, the least spread of the feet's alternation
+STRIDE_CYCLES = 1.5         # strides that must be seen
+LONGEST_STRIDE_S = 10.0     # s, the slowest alternation looked for
+_STRIDE_LANDMARKS = [LANDMARK_INDEX[n] for n in ("left_ankle", "right_ankle", "left_shoulder",
+                                                 "right_shoulder", "left_hip", "right_hip")]
 FOOT_LANDMARKS = [LANDMARK_INDEX[f"{side}_{part}"] for side in ("left", "right")
                   for part in ("ankle", "heel", "foot_index")]
 
@@ -99,6 +113,40 @@ def hidden_feet_share(keypoints2d: np.ndarray, valid: np.ndarray,
     return float(1.0 - seen.mean())
 
 
+def stride_period(keypoints2d: np.ndarray, valid: np.ndarray, fps: float) -> float | None:
+    """Seconds (at `fps`) the feet take to alternate where the person steps periodically, else
+    None. The signal is the image distance between the ankles along its main direction, in
+    torso lengths; the period is the lag of its autocorrelation's first peak (on the first
+    positive lobe after a negative one), which must reach STRIDE_REGULARITY within
+    1 / STRIDE_CYCLES of the frames seen."""
+    kp = np.asarray(keypoints2d, dtype=float)
+    seen = np.asarray(valid, bool) & (kp[:, _STRIDE_LANDMARKS, 2] >= MIN_CONFIDENCE).all(axis=1)
+    if seen.mean() < 0.8 or seen.sum() < 10:
+        return None
+    frames = np.arange(len(kp))
+    spread = kp[:, _STRIDE_LANDMARKS[0], :2] - kp[:, _STRIDE_LANDMARKS[1], :2]
+    spread = np.stack([np.interp(frames, frames[seen], spread[seen, i]) for i in range(2)], 1)
+    torso = np.linalg.norm(kp[seen][:, 2:4, :2].mean(axis=1) - kp[seen][:, 4:6, :2].mean(axis=1),
+                           axis=1)
+    spread -= spread.mean(axis=0)
+    direction = np.linalg.svd(spread, full_matrices=False)[2][0]
+    x = spread @ direction / max(float(np.median(torso)), 1e-9)
+    if x.std() < STRIDE_AMPLITUDE:
+        return None
+    n = len(x)
+    lags = np.arange(1, int(min(n / STRIDE_CYCLES, LONGEST_STRIDE_S * fps)) + 1)
+    corr = np.array([np.corrcoef(x[:-k], x[k:])[0, 1] for k in lags])
+    # The first positive lobe after the first negative one: one period (not a multiple).
+    below = np.flatnonzero(corr < 0)
+    above = below[0] + np.flatnonzero(corr[below[0]:] >= 0) if len(below) else []
+    if not len(above):
+        return None
+    lobe = corr[above[0]:]
+    end = np.flatnonzero(lobe < 0)
+    best = above[0] + int(np.argmax(lobe[:end[0]] if len(end) else lobe))
+    return float(lags[best] / fps) if corr[best] >= STRIDE_REGULARITY else None
+
+
 def raised_runs(joints: np.ndarray, fps: float) -> list[tuple[int, int, float]]:
     """(first, last, median height m) of each stretch of at least RAISED_SECONDS in which
     both feet of a motion (T, 21, 3), world z up with the floor at 0, stay more than
@@ -159,6 +207,21 @@ def hidden_feet_message(share: float) -> str | None:
             "frames with a person: the detector guesses where they are, so the floor, the "
             "foot contacts and the physics resting on them are guesses too. Film the whole "
             "person, feet included")
+
+
+def slow_stride_message(period: float | None, slow_motion: float = 1.0) -> str | None:
+    """A hint that the footage may be slow motion, where `period` (s, on the clock the
+    reconstruction took as real, after `slow_motion`) is slower than SLOW_STRIDE_S; else None."""
+    if period is None or period <= SLOW_STRIDE_S:
+        return None
+    low, high = (slow_motion * period / stride for stride in sorted(STRIDE_S, reverse=True))
+    told = "" if slow_motion == 1.0 else f" even at the declared {slow_motion:g}x slow motion"
+    return (f"input: the feet alternate every {period:.1f} s{told}, slower than people walk "
+            f"(a stride of about 1.0-1.2 s) or run (0.6-0.8 s). If the footage is slow motion "
+            f"(filmed at a high frame rate, played slower), say so, e.g. --slow-motion "
+            f"{low:.1f} to {high:.1f} for this stride: under real gravity the simulated body "
+            "cannot move as slowly as the person seems to (docs/dynamics.md, Slow-motion "
+            "footage)")
 
 
 def trimmed_message(trimmed: list[int] | None, total: int, fps: float) -> str | None:
@@ -248,5 +311,6 @@ def warning_lines(found: dict, fps: float) -> list[str]:
                             tuple(parse_obstacle(b) for b in found.get("seats", [])), fps),
              invalid_message([tuple(r) for r in found.get("invalid_windows", [])], fps),
              unrecorded_forces_message([tuple(r) for r in found.get("unrecorded_forces", [])],
-                                       fps)]
+                                       fps),
+             slow_stride_message(found.get("stride_period"), found.get("slow_motion", 1.0))]
     return [line for line in lines if line]

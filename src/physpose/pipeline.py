@@ -158,6 +158,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     hidden_feet = diagnostics.hidden_feet_share(obs.frame_keypoints(), obs.valid,
                                                 obs.image_size)
     _warn(diagnostics.hidden_feet_message(hidden_feet))
+    stride = diagnostics.stride_period(obs.frame_keypoints(), obs.valid, obs.fps)
+    _warn(diagnostics.slow_stride_message(stride, config.slow_motion))
     kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
                          **({"log": stderr_log} if progress else {}))
     lap("kinematics")
@@ -193,7 +195,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                              "seated": [list(r) for r in seated],
                              "seats": [b.spec() for b in seats],
                              "invalid_windows": [list(r) for r in invalid],
-                             "unrecorded_forces": [list(r) for r in unrecorded]})
+                             "unrecorded_forces": [list(r) for r in unrecorded],
+                             "stride_period": stride, "slow_motion": config.slow_motion})
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)
     resolved = {"stage": "reconstruct", "physpose_version": __version__,
