@@ -149,6 +149,12 @@ def test_cli_fit_writes_the_contract(tmp_path, monkeypatch):
     config = json.loads((out / "config.json").read_text())
     assert config["variant"] == "SO" and config["kinematics"]["optimize_pose"]
     assert (out / "overlay.mp4").stat().st_size > 0
+    # The same observations declared 2x slow-motion footage: fitted on the real clock.
+    slow = tmp_path / "slow"
+    assert main(["fit", str(obs_path), "--out", str(slow), "--variant", "SO", "--camera",
+                 str(tmp_path / "K.json"), "--slow-motion", "2", "--no-overlay"]) == 0
+    rec = Reconstruction.load(slow)
+    assert rec.fps == 2 * clip.observations.fps and rec.slow_motion == 2.0
 
 
 def test_cli_fit_bad_input(tmp_path, capsys):
@@ -162,6 +168,8 @@ def test_cli_fit_bad_input(tmp_path, capsys):
                  str(bad_k)]) == 2
     assert "pinhole" in capsys.readouterr().err
     assert main(["fit", str(obs_path), "--out", str(tmp_path / "o"), "--fps", "10"]) == 2
+    assert main(["fit", str(obs_path), "--out", str(tmp_path / "o"), "--slow-motion", "0"]) == 2
+    assert "slow motion 0x is outside" in capsys.readouterr().err
 
 
 def test_variant_flags_round_trip():

@@ -219,6 +219,17 @@ def fill_gaps(values: np.ndarray, detected: np.ndarray, max_gap: int) -> tuple[n
     return filled, interpolated
 
 
+def footage_observe(cfg: ObserveConfig, slow_motion: float) -> ObserveConfig:
+    """`cfg` for footage that plays `slow_motion` times slower than real time, whose
+    `target_fps` is meant on the real clock: the footage is sampled that many times more
+    sparsely (within the accepted range of rates)."""
+    if slow_motion == 1.0:
+        return cfg
+    rate = min(max(cfg.target_fps / slow_motion, videolib.MIN_TARGET_FPS),
+               videolib.MAX_TARGET_FPS)
+    return dataclasses.replace(cfg, target_fps=rate)
+
+
 def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
             progress: bool = True) -> Observations:
     """Run MediaPipe Pose on a video and return its Observations (cached by input + settings).

@@ -27,10 +27,9 @@ from physpose.errors import PhysposeError
 from physpose.kinematics.config import KinematicConfig
 from physpose.keypoints_io import is_keypoints_file, load_keypoints
 from physpose.observations import Observations, check_slow_motion
-from physpose.observe import ObserveConfig, observe
+from physpose.observe import ObserveConfig, footage_observe, observe
 from physpose.reconstruction import Reconstruction
 from physpose.scene import SceneConfig
-from physpose.video import MAX_TARGET_FPS, MIN_TARGET_FPS
 
 RECONSTRUCTION_FILE = "reconstruction.npz"
 CONFIG_FILE = "config.json"
@@ -64,11 +63,7 @@ class PipelineConfig:
     def footage_observe(self) -> ObserveConfig:
         """The observe settings on the footage's clock: slow-motion footage is sampled
         `slow_motion` times more sparsely, so that the analysis rate holds in real time."""
-        if self.slow_motion == 1.0:
-            return self.observe
-        rate = min(max(self.observe.target_fps / self.slow_motion, MIN_TARGET_FPS),
-                   MAX_TARGET_FPS)
-        return dataclasses.replace(self.observe, target_fps=rate)
+        return footage_observe(self.observe, self.slow_motion)
 
     @classmethod
     def preset(cls, name: str = "fast", **changes) -> PipelineConfig:

@@ -17,7 +17,8 @@ from physpose.errors import PhysposeError
 from physpose.kinematics.camera import check_intrinsics
 from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
 from physpose.kinematics.fit import fit_kinematics, stderr_log
-from physpose.observe import ObserveConfig
+from physpose.observations import check_slow_motion
+from physpose.observe import ObserveConfig, footage_observe
 
 RECONSTRUCTION_FILE = "reconstruction.npz"
 CONFIG_FILE = "config.json"
@@ -40,6 +41,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mass", type=float, help="the person's mass, kg")
     p.add_argument("--fps", type=float, help="analysis frame rate for videos, Hz "
                                              f"(default {ObserveConfig.target_fps:g})")
+    p.add_argument("--slow-motion", type=float, default=1.0, metavar="X",
+                   help="the footage plays X times slower than real time (e.g. 4 for 120 fps "
+                        "played at 30): the fit runs on the real clock and --fps is the "
+                        "analysis rate in real time (default 1)")
     p.add_argument("--camera", type=Path, metavar="CALIB",
                    help="camera intrinsics: a JSON file with K = [[fx,0,cx],[0,fy,cy],[0,0,1]] "
                         "or a text file of the 9 numbers (default: estimated)")
@@ -72,9 +77,11 @@ def _run(args: argparse.Namespace) -> int:
     if args.fps is not None and args.input.suffix.lower() in (".npz", ".json"):
         raise PhysposeError("--fps applies to videos, not to observations", path=args.input,
                             remedy="drop --fps")
+    check_slow_motion(args.slow_motion)
     observe_cfg = ObserveConfig(use_cache=not args.no_cache) if args.fps is None else \
         ObserveConfig(target_fps=args.fps, use_cache=not args.no_cache)
-    obs = load_observations(args.input, observe_cfg, progress=sys.stderr.isatty())
+    obs = load_observations(args.input, footage_observe(observe_cfg, args.slow_motion),
+                            progress=sys.stderr.isatty()).on_real_clock(args.slow_motion)
     K = read_intrinsics(args.camera) if args.camera is not None else None
     config = KinematicConfig.preset(args.variant, use_cache=not args.no_cache)
     fit = fit_kinematics(obs, config, height=args.height, mass=args.mass, camera_K=K,
@@ -84,10 +91,11 @@ def _run(args: argparse.Namespace) -> int:
                             remedy="pass a folder for --out")
     args.out.mkdir(parents=True, exist_ok=True)
     recon = reconstruction_of(fit, obs)
+    recon = recon.replace(meta={**recon.meta, "slow_motion": args.slow_motion})
     recon.save(args.out / RECONSTRUCTION_FILE)
     resolved = {"stage": "kinematics", "physpose_version": __version__,
                 "input": str(args.input.resolve()), "variant": args.variant,
-                "height": args.height, "mass": args.mass,
+                "height": args.height, "mass": args.mass, "slow_motion": args.slow_motion,
                 "camera": None if args.camera is None else str(args.camera.resolve()),
                 "observe": dataclasses.asdict(observe_cfg),
                 "kinematics": dataclasses.asdict(config),
