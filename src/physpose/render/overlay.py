@@ -212,7 +212,8 @@ def _legend(image: np.ndarray, scene: _Scene, t: int) -> None:
     if scene.force_arrows is not None:
         rows.append((f"ground force, {FORCE_M_PER_BW:g} m/BW", FORCE_COLOR))
     cv2.rectangle(image, (6, 6), (226, 30 + 20 * len(rows)), (255, 255, 255), -1)
-    cv2.putText(image, f"t = {t / scene.rec.fps:5.2f} s  frame {t + 1}", (12, 24),
+    clock = " real" if scene.rec.slow_motion != 1.0 else ""  # not the footage's time
+    cv2.putText(image, f"t = {t / scene.rec.fps:5.2f} s{clock}  frame {t + 1}", (12, 24),
                 cv2.FONT_HERSHEY_SIMPLEX, 0.45, (30, 30, 30), 1, cv2.LINE_AA)
     for i, (name, color) in enumerate(rows):
         y = 44 + 20 * i
