@@ -126,7 +126,8 @@ def test_the_seated_warning_names_frames_and_the_seat():
     assert "puts a seat there (box:-0.10" in diagnostics_lines(recon)[0]
 
 
-def _stepping(period: float, seconds: float = 6.0, fps: float = 25.0, seed: int = 0):
+def _stepping(period: float, seconds: float = 6.0, fps: float = 25.0, seed: int = 0,
+              swing_px: float = 40.0):
     """(keypoints2d, valid) of a person stepping on the spot in the image: the ankles swing
     fore and aft in antiphase with the given period (s), torso 100 px, 2 px detector noise."""
     rng = np.random.default_rng(seed)
@@ -135,7 +136,8 @@ def _stepping(period: float, seconds: float = 6.0, fps: float = 25.0, seed: int 
     kp[..., 2] = 0.9
     kp[:, [11, 12], :2] = [[290, 100], [310, 100]]
     kp[:, [23, 24], :2] = [[292, 200], [308, 200]]
-    swing = 40 * np.sin(2 * np.pi * t / period) if period else np.cumsum(rng.normal(0, 8, len(t)))
+    swing = swing_px * np.sin(2 * np.pi * t / period) if period \
+        else np.cumsum(rng.normal(0, 8, len(t)))
     kp[:, 27, :2] = np.stack([300 + swing, np.full_like(t, 380)], 1)
     kp[:, 28, :2] = np.stack([300 - swing, np.full_like(t, 380)], 1)
     kp[..., :2] += rng.normal(0, 2, kp[..., :2].shape)
@@ -157,6 +159,8 @@ def test_a_stride_too_slow_for_real_time_hints_at_slow_motion():
     # No stride where the feet do not alternate periodically, or too few strides are seen.
     assert diagnostics.stride_period(*_stepping(0.0), fps) is None
     assert diagnostics.stride_period(*_stepping(2.8, seconds=3.5), fps) is None
+    # Feet that hardly move apart (5 px against a 100 px torso) are no stride.
+    assert diagnostics.stride_period(*_stepping(2.8, swing_px=5.0), fps) is None
     kp, valid = _stepping(2.8)
     assert diagnostics.stride_period(kp, valid & (np.arange(len(valid)) % 3 > 0), fps) is None
     found = {"stride_period": slowed, "slow_motion": 1.0}

@@ -126,8 +126,8 @@ def stride_period(keypoints2d: np.ndarray, valid: np.ndarray, fps: float) -> flo
     frames = np.arange(len(kp))
     spread = kp[:, _STRIDE_LANDMARKS[0], :2] - kp[:, _STRIDE_LANDMARKS[1], :2]
     spread = np.stack([np.interp(frames, frames[seen], spread[seen, i]) for i in range(2)], 1)
-    torso = np.linalg.norm(kp[seen][:, 2:4, :2].mean(axis=1) - kp[seen][:, 4:6, :2].mean(axis=1),
-                           axis=1)
+    shoulders, hips = (kp[seen][:, _STRIDE_LANDMARKS[i:i + 2], :2].mean(axis=1) for i in (2, 4))
+    torso = np.linalg.norm(shoulders - hips, axis=1)
     spread -= spread.mean(axis=0)
     direction = np.linalg.svd(spread, full_matrices=False)[2][0]
     x = spread @ direction / max(float(np.median(torso)), 1e-9)
