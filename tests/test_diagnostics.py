@@ -165,3 +165,12 @@ def test_a_stride_too_slow_for_real_time_hints_at_slow_motion():
     assert diagnostics.stride_period(kp, valid & (np.arange(len(valid)) % 3 > 0), fps) is None
     found = {"stride_period": slowed, "slow_motion": 1.0}
     assert any("slow motion" in line for line in diagnostics.warning_lines(found, fps))
+
+
+def test_analysis_rates_above_the_measured_ones_are_warned_about():
+    assert diagnostics.rate_message(25.0) is None and diagnostics.rate_message(50.0) is None
+    line = diagnostics.rate_message(100.0)
+    assert "analysed at 100 frames per second" in line and "--fps 25" in line
+    assert diagnostics.warning_lines({}, 100.0) == [line]
+    assert diagnostics.warning_lines({}, 25.0) == []
+

@@ -18,6 +18,7 @@ somersaults off it, and back), and what the dynamics stage makes of them:
   valid (the output there is the least bad fall, not a reconstruction).
 - `unrecorded_force_runs`: frames whose simulated forces are missing because their windows
   were resumed from checkpoints an earlier physpose wrote without them.
+- `rate_message`: an analysis rate above the rates the kinematic fit was measured at.
 - `stride_period`: how long the feet take to alternate when the person walks or runs. A
   stride far slower than people walk or run hints at slow-motion footage, which the physics
   must be told of (`--slow-motion`): under real gravity it cannot move as slowly as the person
@@ -47,6 +48,7 @@ STRIDE_REGULARITY = 0.8     # autocorrelation a periodic stride reaches at one p
 STRIDE_AMPLITUDE = 0.15     # torso lengths, the least spread of the feet's alternation
 STRIDE_CYCLES = 1.5         # strides that must be seen
 LONGEST_STRIDE_S = 10.0     # s, the slowest alternation looked for
+TUNED_RATE_HZ = 50.0        # the fastest analysis rate measured to work (tuned at 25 Hz)
 _STRIDE_LANDMARKS = [LANDMARK_INDEX[n] for n in ("left_ankle", "right_ankle", "left_shoulder",
                                                  "right_shoulder", "left_hip", "right_hip")]
 FOOT_LANDMARKS = [LANDMARK_INDEX[f"{side}_{part}"] for side in ("left", "right")
@@ -224,6 +226,16 @@ def slow_stride_message(period: float | None, slow_motion: float = 1.0) -> str |
             "footage)")
 
 
+def rate_message(fps: float) -> str | None:
+    """A warning where the analysis rate (real clock) is above TUNED_RATE_HZ, else None."""
+    if fps <= TUNED_RATE_HZ:
+        return None
+    return (f"input: analysed at {fps:g} frames per second of real time; the kinematic fit is "
+            f"tuned at 25 and measured up to {TUNED_RATE_HZ:g}, and at 100 it lost part of a "
+            "fast run (docs/kinematics.md, Conventions and limits). Use --fps 25 unless the "
+            "motion needs more")
+
+
 def trimmed_message(trimmed: list[int] | None, total: int, fps: float) -> str | None:
     """A note on the frames left out before and after the person is in view, or None.
     trimmed: [first, last] frames kept of `total`."""
@@ -301,7 +313,8 @@ def unrecorded_forces_message(runs: list[tuple[int, int]], fps: float) -> str | 
 
 def warning_lines(found: dict, fps: float) -> list[str]:
     """The warnings of a reconstruction's meta ``diagnostics`` (as the pipeline stores them)."""
-    lines = [trimmed_message(found.get("trimmed"), found.get("observed_frames", 0), fps),
+    lines = [rate_message(fps),
+             trimmed_message(found.get("trimmed"), found.get("observed_frames", 0), fps),
              camera_message(found.get("camera_motion")),
              jumps_message(found.get("person_jumps", []), fps),
              hidden_feet_message(found.get("hidden_feet", 0.0)),

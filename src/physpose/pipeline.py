@@ -144,6 +144,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                             f"reconstruct motion from (need at least {MIN_FRAMES})",
                             path=obs.source, remedy="use a longer clip, or a wider --start/--end")
     lap("observe")
+    _warn(diagnostics.rate_message(obs.fps))
     observed_frames = obs.num_frames
     obs, trimmed = trim_unseen_ends(obs)
     _warn(diagnostics.trimmed_message(trimmed, observed_frames, obs.fps))

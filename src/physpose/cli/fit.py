@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from physpose import __version__
+from physpose.diagnostics import rate_message
 from physpose.errors import PhysposeError
 from physpose.kinematics.camera import check_intrinsics
 from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
@@ -82,6 +83,9 @@ def _run(args: argparse.Namespace) -> int:
         ObserveConfig(target_fps=args.fps, use_cache=not args.no_cache)
     obs = load_observations(args.input, footage_observe(observe_cfg, args.slow_motion),
                             progress=sys.stderr.isatty()).on_real_clock(args.slow_motion)
+    rate = rate_message(obs.fps)
+    if rate:
+        print(f"warning: {rate}", file=sys.stderr, flush=True)
     K = read_intrinsics(args.camera) if args.camera is not None else None
     config = KinematicConfig.preset(args.variant, use_cache=not args.no_cache)
     fit = fit_kinematics(obs, config, height=args.height, mass=args.mass, camera_K=K,
