@@ -70,14 +70,14 @@ def test_invalid_windows_are_merged_and_every_warning_names_frames_and_a_remedy(
     unsupported = diagnostics.raised_message([(0, 142, 1.8)], 25.0, supported=False)
     assert "no support was added" in unsupported and "puts a box" not in unsupported
     assert "joints_kinematic" in diagnostics.invalid_message([(0, 34)], 25.0)
-    recon = SimpleNamespace(fps=25.0, meta={"diagnostics": {
+    recon = SimpleNamespace(fps=25.0, slow_motion=1.0, meta={"diagnostics": {
         "person_jumps": [142], "raised": [[0, 142, 1.8]], "invalid_windows": []}})
     lines = diagnostics_lines(recon)
     assert len(lines) == 2 and "142" in lines[0] and "1.80 m up" in lines[1]
     assert "no support was added" in lines[1]
     recon.meta["diagnostics"]["supports"] = [[0.0, 0.0, 0.9, 1.5, 1.9, 1.8]]
     assert "puts a box" in diagnostics_lines(recon)[1]
-    assert diagnostics_lines(SimpleNamespace(fps=25.0, meta={})) == []
+    assert diagnostics_lines(SimpleNamespace(fps=25.0, slow_motion=1.0, meta={})) == []
 
 
 def test_forces_missing_from_resumed_windows_are_reported():
@@ -93,7 +93,7 @@ def test_forces_missing_from_resumed_windows_are_reported():
     assert diagnostics.unrecorded_forces_message([], 25.0) is None
     message = diagnostics.unrecorded_forces_message(runs, 25.0)
     assert "0-9 (0.00-0.40 s), 20-21 (0.80-0.88 s)" in message and "--no-resume" in message
-    recon = SimpleNamespace(fps=25.0, meta={"diagnostics": {"unrecorded_forces": [[0, 9]]}})
+    recon = SimpleNamespace(fps=25.0, slow_motion=1.0, meta={"diagnostics": {"unrecorded_forces": [[0, 9]]}})
     assert diagnostics_lines(recon) == [diagnostics.unrecorded_forces_message([(0, 9)], 25.0)]
 
 
@@ -110,7 +110,7 @@ def test_feet_out_of_the_picture_or_unseen_are_counted_and_warned_about():
     assert diagnostics.hidden_feet_share(kp, np.zeros(40, bool), (1920, 1080)) == 0.0
     assert diagnostics.hidden_feet_message(0.2) is None
     assert "feet are out of the picture or hidden in 50%" in diagnostics.hidden_feet_message(0.5)
-    recon = SimpleNamespace(fps=25.0, meta={"diagnostics": {"hidden_feet": 0.9}})
+    recon = SimpleNamespace(fps=25.0, slow_motion=1.0, meta={"diagnostics": {"hidden_feet": 0.9}})
     assert "90%" in diagnostics_lines(recon)[0]
 
 
@@ -121,7 +121,7 @@ def test_the_seated_warning_names_frames_and_the_seat():
     assert "36-75" in text and "box:-0.10,0.00,0.33,0.50,0.48,0.10" in text
     assert "no seat was added" in diagnostics.seated_message([(36, 75, 0.38)], (), 25.0)
     assert diagnostics.seated_message([], (), 25.0) is None
-    recon = SimpleNamespace(fps=25.0, meta={"diagnostics": {
+    recon = SimpleNamespace(fps=25.0, slow_motion=1.0, meta={"diagnostics": {
         "seated": [[36, 75, 0.38]], "seats": [seat.spec()]}})
     assert "puts a seat there (box:-0.10" in diagnostics_lines(recon)[0]
 
@@ -163,8 +163,10 @@ def test_a_stride_too_slow_for_real_time_hints_at_slow_motion():
     assert diagnostics.stride_period(*_stepping(2.8, swing_px=5.0), fps) is None
     kp, valid = _stepping(2.8)
     assert diagnostics.stride_period(kp, valid & (np.arange(len(valid)) % 3 > 0), fps) is None
-    found = {"stride_period": slowed, "slow_motion": 1.0}
+    found = {"stride_period": slowed}
     assert any("slow motion" in line for line in diagnostics.warning_lines(found, fps))
+    # The result's own factor reaches the hint: declared 2x, a 1.4 s real stride is no hint.
+    assert diagnostics.warning_lines({"stride_period": slowed / 2}, fps, 2.0) == []
 
 
 def test_analysis_rates_above_the_measured_ones_are_warned_about():

@@ -98,7 +98,7 @@ def test_reconstruct_writes_the_contract(tmp_path):
                                           "hidden_feet": 0.0, "raised": [],
                                           "supports": [], "seated": [], "seats": [],
                                           "invalid_windows": [], "unrecorded_forces": [],
-                                          "stride_period": None, "slow_motion": 1.0}
+                                          "stride_period": None}
     # The simulated forces are in the contract's file: the floor carries the body's weight.
     assert loaded.grf_physics.shape == (t, 3, 3) and loaded.torques_physics.shape == (t, 48)
     weight = mujoco.MjModel.from_xml_string(loaded.body_mjcf).body_subtreemass[0] * 9.81

@@ -311,8 +311,9 @@ def unrecorded_forces_message(runs: list[tuple[int, int]], fps: float) -> str | 
             "physpose demo --no-cache)")
 
 
-def warning_lines(found: dict, fps: float) -> list[str]:
-    """The warnings of a reconstruction's meta ``diagnostics`` (as the pipeline stores them)."""
+def warning_lines(found: dict, fps: float, slow_motion: float = 1.0) -> list[str]:
+    """The warnings of a reconstruction's meta ``diagnostics`` (as the pipeline stores them),
+    for a result at `fps` from footage played `slow_motion` times slower than real time."""
     lines = [rate_message(fps),
              trimmed_message(found.get("trimmed"), found.get("observed_frames", 0), fps),
              camera_message(found.get("camera_motion")),
@@ -325,5 +326,5 @@ def warning_lines(found: dict, fps: float) -> list[str]:
              invalid_message([tuple(r) for r in found.get("invalid_windows", [])], fps),
              unrecorded_forces_message([tuple(r) for r in found.get("unrecorded_forces", [])],
                                        fps),
-             slow_stride_message(found.get("stride_period"), found.get("slow_motion", 1.0))]
+             slow_stride_message(found.get("stride_period"), slow_motion)]
     return [line for line in lines if line]

@@ -151,10 +151,10 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     _warn(diagnostics.camera_message(obs.camera_motion))
     jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
     _warn(diagnostics.jumps_message(jumps, obs.fps))
-    hidden_feet = diagnostics.hidden_feet_share(obs.frame_keypoints(), obs.valid,
-                                                obs.image_size)
+    keypoints = obs.frame_keypoints()
+    hidden_feet = diagnostics.hidden_feet_share(keypoints, obs.valid, obs.image_size)
     _warn(diagnostics.hidden_feet_message(hidden_feet))
-    stride = diagnostics.stride_period(obs.frame_keypoints(), obs.valid, obs.fps)
+    stride = diagnostics.stride_period(keypoints, obs.valid, obs.fps)
     _warn(diagnostics.slow_stride_message(stride, config.slow_motion))
     kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
                          **({"log": stderr_log} if progress else {}))
@@ -192,7 +192,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                              "seats": [b.spec() for b in seats],
                              "invalid_windows": [list(r) for r in invalid],
                              "unrecorded_forces": [list(r) for r in unrecorded],
-                             "stride_period": stride, "slow_motion": config.slow_motion})
+                             "stride_period": stride})
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)
     resolved = {"stage": "reconstruct", "physpose_version": __version__,

@@ -332,7 +332,8 @@ def undetected_line(recon: Reconstruction) -> str | None:
 
 def diagnostics_lines(recon: Reconstruction) -> list[str]:
     """The warnings on the input that the pipeline found (physpose.diagnostics), if any."""
-    return diagnostics.warning_lines(recon.meta.get("diagnostics", {}), recon.fps)
+    return diagnostics.warning_lines(recon.meta.get("diagnostics", {}), recon.fps,
+                                     recon.slow_motion)
 
 
 def print_summary(recon: Reconstruction, out: Path, written: dict[str, Path],

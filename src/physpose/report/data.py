@@ -239,5 +239,6 @@ def summary_rows(rec: Reconstruction, folder: Path) -> list[tuple[str, str]]:
         forces = forces_summary(rec)
         if forces is not None:
             rows.append(("physics forces", forces))
-    rows += [("warning", line) for line in warning_lines(rec.meta.get("diagnostics", {}), rec.fps)]
+    rows += [("warning", line) for line in warning_lines(rec.meta.get("diagnostics", {}), rec.fps,
+                                                         rec.slow_motion)]
     return rows
