@@ -46,7 +46,7 @@ from physpose.observations import Observations
 from physpose.shape import BodyShape
 from physpose.skeleton import NQ
 
-KINEMATICS_VERSION = 5  # bump when a change alters the result for the same input and config
+KINEMATICS_VERSION = 6  # bump when a change alters the result for the same input and config
 Log = Callable[[str], None]
 
 

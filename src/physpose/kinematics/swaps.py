@@ -12,6 +12,11 @@ frame's state says which groups are exchanged (2^3 states); the Viterbi path min
   image while walking, and it fixes which limb labelling of the two mirror images is right;
 - a cost per swap event, an event exchanging one limb group or the whole body, so a clear
   whole-body flip seen on the arms carries the legs and the trunk along.
+The motion scale shrinks with the frame rate (landmarks move less between frames) down to
+MOTION_SIGMA_MIN, the detector's own frame-to-frame noise, which it reaches at 50 fps. Above,
+where the floor lifts the scale by a factor k, the attachment costs are divided by k^2 like
+the motion costs: a detector's 3d error persists over frames, so sampling the same seconds
+more densely must not outvote the motion and the swap events' cost.
 The labelling as a whole (all groups exchanged in every frame) is a mirror image with the same
 cost; of the two, the one keeping the trunk's detected labels in more frames wins. Swapped
 frames exchange the left and right landmarks (2d, 3d and confidences).
@@ -37,6 +42,7 @@ EVENTS = (("legs",), ("arms",), tuple(GROUPS))  # what the detector swaps at onc
 ATTACH = {"legs": ("knee", "hip"), "arms": ("elbow", "shoulder")}  # limb joint, its root
 SWITCH_COST = 4.0     # cost of a swap event, in units of the squared motion below
 MOTION_SIGMA = 0.25   # torso lengths: typical landmark motion between frames at ~25 fps
+MOTION_SIGMA_MIN = 0.125  # torso lengths: the detector's frame-to-frame noise (reached at 50 fps)
 MOTION_CAP = 9.0      # a landmark's (motion / sigma)^2 saturates towards this: c/(1 + c/cap)
 ATTACH_SIGMA = 0.02   # m of excess limb-to-root distance per unit cost
 
@@ -56,6 +62,14 @@ def _normalised_2d(ev: Evidence) -> np.ndarray:
     return (ev.uv - hip[:, None]) / max(scale, 1e-6)
 
 
+def _motion_sigma(fps: float, fps_ref: float) -> tuple[float, float]:
+    """The motion scale between consecutive frames (torso lengths) and its lift by the noise
+    floor over the scale of motion alone (1 up to 50 fps)."""
+    nominal = MOTION_SIGMA * fps_ref / fps
+    sigma = max(nominal, MOTION_SIGMA_MIN)
+    return sigma, sigma / nominal
+
+
 def _motion_costs(ev: Evidence, parts: tuple[str, ...], fps_ref: float) -> np.ndarray:
     """(T, 2, 2) cost of the move from the previous frame with evidence (state i, 1 =
     exchanged) to this frame (state j); zero where either frame has no evidence."""
@@ -64,7 +78,7 @@ def _motion_costs(ev: Evidence, parts: tuple[str, ...], fps_ref: float) -> np.nd
     states = (np.concatenate([x[:, left], x[:, right]], axis=1),     # labels as given
               np.concatenate([x[:, right], x[:, left]], axis=1))     # labels exchanged
     w = np.concatenate([ev.weight[:, left], ev.weight[:, right]], axis=1)
-    sigma = MOTION_SIGMA * fps_ref / ev.fps
+    sigma, _ = _motion_sigma(ev.fps, fps_ref)
     cost = np.zeros((len(x), 2, 2))
     good = np.flatnonzero(ev.valid)
     for last, t in zip(good[:-1], good[1:]):
@@ -121,6 +135,7 @@ def swap_paths(ev: Evidence, groups: tuple[str, ...] = tuple(GROUPS), fps_ref: f
             if name in ATTACH:
                 relative = bits[:, g] ^ bits[:, groups.index("trunk")]
                 emit += _attachment_costs(ev, name)[:, relative]
+        emit /= _motion_sigma(ev.fps, fps_ref)[1] ** 2
     cost = np.zeros((t_count, n_states))
     cost[0] = emit[0]
     back = np.zeros((t_count, n_states), dtype=int)
