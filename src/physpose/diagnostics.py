@@ -230,10 +230,10 @@ def rate_message(fps: float) -> str | None:
     """A warning where the analysis rate (real clock) is above TUNED_RATE_HZ, else None."""
     if fps <= TUNED_RATE_HZ:
         return None
-    return (f"input: analysed at {fps:g} frames per second of real time; the kinematic fit is "
-            f"tuned at 25 and measured up to {TUNED_RATE_HZ:g}, and at 100 it lost part of a "
-            "fast run (docs/kinematics.md, Conventions and limits). Use --fps 25 unless the "
-            "motion needs more")
+    return (f"input: analysed at {fps:g} frames per second of real time; physpose is tuned at "
+            f"25 and measured to work up to {TUNED_RATE_HZ:g}. At 100 on motion capture the "
+            "physics missed the detections by more and its feet slid more (docs/kinematics.md, "
+            "Conventions and limits). Use --fps 25 unless the motion needs more")
 
 
 def trimmed_message(trimmed: list[int] | None, total: int, fps: float) -> str | None:
