@@ -9,11 +9,11 @@ import pytest
 
 from physpose.benchmark import VARIANTS, get_variant, register_variant, write_results
 from physpose.benchmark.baseline import level_ground_frame, solve_root_translation
-from physpose.benchmark.material import (Clip, MaterialConfig, _observe_config, crop_mocap,
-                                         mocap_clip, uniform_fps)
+from physpose.benchmark.material import (Clip, Material, MaterialConfig, _observe_config,
+                                         crop_mocap, load_clips, mocap_clip, uniform_fps)
 from physpose.benchmark.report import aggregate
 from physpose.benchmark.runner import BenchmarkConfig, results_document, run_clips, run_variant
-from physpose.benchmark.scoring import TRUTH_ROW
+from physpose.benchmark.scoring import TRUTH_ROW, truth_record
 from physpose.cli import main
 from physpose.errors import PhysposeError
 from physpose.joints import JOINT_INDEX, JOINT_NAMES, LANDMARK_INDEX, joints_from_landmarks
@@ -25,9 +25,9 @@ from synthetic_video import make_video
 FPS = 25.0
 
 
-def _walk(seconds: float = 1.2) -> MocapClip:
+def _walk(seconds: float = 1.2, fps: float = FPS) -> MocapClip:
     """A stick figure walking along +x at 1 m/s with swinging legs, z up, feet on z = 0."""
-    t = np.arange(int(seconds * FPS)) / FPS
+    t = np.arange(int(round(seconds * fps))) / fps
     phase = 2 * np.pi * 1.8 * t
     pts: dict[str, np.ndarray] = {}
     root = np.stack([t, 0 * t, 0.95 + 0 * t], 1)
@@ -50,9 +50,9 @@ def _walk(seconds: float = 1.2) -> MocapClip:
     joints = np.stack([trunk.get(n, pts.get(n)) for n in JOINT_NAMES], 1)
     n = len(t)
     hand = np.array([[0, 1.0, 0], [0, 0, 1.0], [-1.0, 0, 0]]).T  # fingers down, thumb forward
-    return MocapClip(name="walk", source="synthetic_walk.bvh", fps=FPS, joints=joints,
+    return MocapClip(name="walk", source="synthetic_walk.bvh", fps=fps, joints=joints,
                      head_top=head + [0, 0, 0.12], head_rot=np.tile(np.eye(3), (n, 1, 1)),
-                     hand_rot=np.tile(hand, (n, 2, 1, 1)), source_fps=FPS, floor_offset=0.0)
+                     hand_rot=np.tile(hand, (n, 2, 1, 1)), source_fps=fps, floor_offset=0.0)
 
 
 @pytest.fixture(scope="module")
@@ -85,6 +85,53 @@ def test_cli_noiseless_flag_reaches_the_material(tmp_path, monkeypatch):
     assert main(["benchmark", "--mocap", str(clip_file), "--truth-input",
                  "--out", str(tmp_path / "out")]) == 0
     assert not seen["cfg"].material.noiseless and seen["cfg"].material.truth_input
+
+
+def test_slow_motion_footage_plays_the_capture_slower_and_is_scored_on_the_real_clock(
+        clip, monkeypatch):
+    slow = mocap_clip(_walk(fps=4 * FPS), MaterialConfig(max_seconds=1.0, slow_motion=4),
+                      name="walk")
+    obs = slow.observations
+    assert obs.fps == FPS and obs.num_frames == 4 * clip.observations.num_frames
+    assert obs.timestamps[-1] == pytest.approx((obs.num_frames - 1) / FPS)  # 4 s of footage
+    assert slow.score_step == 4 and len(slow.truth.joints) == obs.num_frames
+    # Every 4th frame is the motion at 25 Hz: the truth's own row matches the real-time clip's.
+    assert truth_record(slow)["metrics"] == pytest.approx(truth_record(clip)["metrics"])
+    # The truth's poses, one per footage frame, score zero on the real frames (what a slowed
+    # clock costs is the physics': its gravity and speeds, not the scoring).
+    monkeypatch.setitem(VARIANTS, "test_oracle", _oracle(slow, yaw_deg=0.0))
+    row = run_variant("test_oracle", slow)
+    for key in ("mpjpe_g_mm", "mpjpe_pa_mm", "velocity_error_mps", "mpjpe_2d_px"):
+        assert row["metrics"][key] == pytest.approx(0.0, abs=1e-6), key
+    monkeypatch.setitem(VARIANTS, "test_oracle_real", _oracle(clip, yaw_deg=0.0))
+    real = run_variant("test_oracle_real", clip)   # accelerations read at the real rate
+    assert row["metrics"]["jitter_mps2"] == pytest.approx(real["metrics"]["jitter_mps2"])
+
+
+def test_cli_slow_motion_reaches_the_material_and_leaves_out_real_footage(tmp_path,
+                                                                          monkeypatch):
+    seen = {}
+
+    def fake_run(materials, cfg, **kwargs):
+        seen.update(cfg=cfg, materials=materials, skipped=kwargs.get("skipped"))
+        return results_document([], [], cfg)
+
+    monkeypatch.setattr("physpose.cli.benchmark.run_benchmark", fake_run)
+    shared = [Material("mocap", tmp_path / "a.bvh"), Material("video", tmp_path / "b.mp4")]
+    monkeypatch.setattr("physpose.cli.benchmark.shared_material", lambda: (shared, []))
+    assert main(["benchmark", "--slow-motion", "4", "--out", str(tmp_path / "out")]) == 0
+    assert seen["cfg"].material.slow_motion == 4
+    assert [m.kind for m in seen["materials"]] == ["mocap"]
+    assert any("b.mp4" in m and "motion capture only" in m for m in seen["skipped"])
+
+
+def test_slow_motion_is_refused_where_it_cannot_apply(tmp_path):
+    with pytest.raises(PhysposeError, match="whole number"):
+        MaterialConfig(slow_motion=0)
+    video = tmp_path / "v.mp4"
+    video.write_bytes(b"")
+    with pytest.raises(PhysposeError, match="only motion capture"):
+        load_clips(Material("video", video), MaterialConfig(slow_motion=2))
 
 
 def _oracle(truth_clip: Clip, yaw_deg: float = 40.0):

@@ -28,6 +28,7 @@ from physpose.paths import pose2sim_demo_dir, shared_data_dir
 from physpose.video import VIDEO_EXTENSIONS, probe
 
 KINDS = ("mocap", "multiview", "video")
+MAX_SLOW_MOTION = 16  # the slowest footage the benchmark plays motion capture as (x real time)
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,11 @@ class MaterialConfig:
     seed: int = 0                 # detector simulator seed
     noiseless: bool = False       # mocap seen by a detector without noise or biases (an oracle)
     truth_input: bool = False     # give variants the mocap truth (an oracle, benchmark/oracle.py)
+    # Motion capture filmed this many times slower than it happened and not declared: the
+    # detector simulator sees it at fps x slow_motion, the footage plays at fps, and every
+    # slow_motion-th frame is scored on the real clock (what users who do not pass
+    # --slow-motion get; docs/benchmark.md). Motion capture only.
+    slow_motion: int = 1
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.fps) and self.fps > 0):
@@ -54,6 +60,9 @@ class MaterialConfig:
         if not (math.isfinite(self.start_seconds) and self.start_seconds >= 0):
             raise PhysposeError(f"start_seconds={self.start_seconds} must be >= 0",
                                 remedy="pass --start with a time in seconds, e.g. --start 4")
+        if not (isinstance(self.slow_motion, int) and 1 <= self.slow_motion <= MAX_SLOW_MOTION):
+            raise PhysposeError(f"slow_motion={self.slow_motion} must be a whole number from 1 "
+                                f"to {MAX_SLOW_MOTION}", remedy="pass e.g. --slow-motion 4")
         if not math.isfinite(self.camera_azimuth_deg):
             raise PhysposeError(f"camera_azimuth_deg={self.camera_azimuth_deg} is not a number",
                                 remedy="pass --camera-azimuth in degrees, e.g. --camera-azimuth 60")
@@ -80,6 +89,9 @@ class Clip:
     context: VariantContext
     truth: Truth | None           # None for real videos
     timings_s: dict[str, float]   # seconds spent producing the observations, per stage
+    # Every score_step-th frame is scored, against the truth's frame of the same index: slowed
+    # footage's frames on the real clock at the footage's frame rate.
+    score_step: int = 1
 
 
 @dataclass(frozen=True)
@@ -103,6 +115,10 @@ def load_clips(material: Material, cfg: MaterialConfig) -> list[Clip]:
     if not material.path.exists():
         raise PhysposeError(f"{material.kind} material not found", path=material.path,
                             remedy="check the path")
+    if cfg.slow_motion != 1 and material.kind != "mocap":
+        raise PhysposeError(f"only motion capture can be played as slow motion; this is "
+                            f"{material.kind} material", path=material.path,
+                            remedy="leave it out, or drop --slow-motion")
     return loaders[material.kind](material.path, cfg)
 
 
@@ -184,7 +200,7 @@ def _multiview_clips(folder: Path, cfg: MaterialConfig) -> list[Clip]:
 
 def _mocap_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:
     start = time.perf_counter()
-    motion = load_mocap(path, target_fps=cfg.fps)
+    motion = load_mocap(path, target_fps=cfg.fps * cfg.slow_motion)
     if motion.meta.get("leading_frames_dropped"):
         print(f"benchmark: {path.name}: its first {motion.meta['leading_frames_dropped']} "
               "frame(s) hold a rest pose joined to the motion by a jump; left out",
@@ -199,7 +215,9 @@ def _mocap_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:
 
 
 def mocap_clip(motion: MocapClip, cfg: MaterialConfig, name: str) -> Clip:
-    """A benchmark clip from ground-truth motion: cropped, then seen by the detector simulator."""
+    """A benchmark clip from ground-truth motion: cropped, then seen by the detector simulator.
+    With `cfg.slow_motion` X, `motion` is sampled at X times the analysis rate, and its footage
+    plays X times slower than the motion happened."""
     start = time.perf_counter()
     motion = crop_mocap(motion, cfg.max_seconds, cfg.start_seconds)
     camera = dict(seed=cfg.seed, azimuth_deg=cfg.camera_azimuth_deg)
@@ -214,8 +232,11 @@ def mocap_clip(motion: MocapClip, cfg: MaterialConfig, name: str) -> Clip:
         truth_T_world2cam=capture.camera_T_world2cam if cfg.truth_input else None)
     truth = Truth(joints=capture.joints, T_world2cam=capture.camera_T_world2cam,
                   K=capture.camera_K)
-    return Clip(kind="mocap", name=name, source=motion.source,
-                observations=capture.observations, context=context, truth=truth,
+    obs, step = capture.observations, cfg.slow_motion
+    if step != 1:  # captured at fps x step, played at fps: the footage's clock runs slow
+        obs = obs.replace(fps=obs.fps / step, timestamps=np.asarray(obs.timestamps) * step)
+    return Clip(kind="mocap", name=name, source=motion.source, observations=obs,
+                context=context, truth=truth, score_step=step,
                 timings_s={"simulate": time.perf_counter() - start})
 
 

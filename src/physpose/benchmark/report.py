@@ -93,6 +93,10 @@ def render_markdown(doc: dict) -> str:
     against the base variant (with two or more variants), then per-clip tables."""
     lines = ["# physpose benchmark", "",
              f"Command: `{doc['command']}`  ", f"Machine: {doc['machine']}", ""]
+    slow = doc.get("config", {}).get("material", {}).get("slow_motion", 1)
+    if slow != 1:
+        lines += [f"Motion capture played as {slow}x slow footage, not declared to the "
+                  f"variants; every {slow}th frame scored, on the real clock.", ""]
     for message in doc.get("skipped", []):
         lines.append(f"- skipped: {message}")
     for failure in doc.get("failures", []):

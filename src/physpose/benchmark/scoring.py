@@ -25,18 +25,20 @@ _UP = np.array([0.0, 0.0, 1.0])
 
 def score_clip(clip: Clip, recon: Reconstruction) -> tuple[dict[str, float], dict[str, float]]:
     """(metrics, ground figures) of `recon` on `clip`; keys carry their units."""
-    joints = recon.joints("best")
+    step = clip.score_step  # slowed footage: its frames on the real clock (material.py)
+    joints = recon.joints("best")[::step]
     # One contact threshold for kinematic and physics output: the paper's -15 mm for dynamics
     # compensates GHUM mesh vertices lying below its box feet; our sole points are the box's
     # own bottom face (skeleton.JOINT_POINTS), so a resting simulated foot sits at about -2 mm
     # and would never count as "in contact" at -15 mm (docs/metrics.md).
     contact = CONTACT_PRESETS["kinematics"]
-    est_2d = project(recon.as_filmed(joints), recon.camera_K, recon.camera_T_world2cam)
+    est_2d = project(recon.as_filmed(recon.joints("best"))[::step], recon.camera_K,
+                     recon.camera_T_world2cam)
     if clip.truth is not None:
-        metrics = evaluate(joints, clip.truth.joints, fps=recon.fps, contact=contact,
+        metrics = evaluate(joints, clip.truth.joints[::step], fps=recon.fps, contact=contact,
                            T_est2common=recon.camera_T_world2cam,
                            T_gt2common=clip.truth.T_world2cam, est_2d=est_2d,
-                           target_2d=project_truth(clip.truth))
+                           target_2d=project_truth(clip.truth)[::step])
     else:
         kp = np.asarray(clip.observations.keypoints2d)
         target = joints_from_landmarks(kp[..., :2])
@@ -52,7 +54,7 @@ def score_clip(clip: Clip, recon: Reconstruction) -> tuple[dict[str, float], dic
 def truth_record(clip: Clip) -> dict:
     """The plausibility metrics of a clip's ground truth itself, as a reference row."""
     assert clip.truth is not None
-    metrics = evaluate(clip.truth.joints, fps=clip.observations.fps,
+    metrics = evaluate(clip.truth.joints[::clip.score_step], fps=clip.observations.fps,
                        contact=CONTACT_PRESETS["kinematics"])
     return {"variant": TRUTH_ROW, "kind": clip.kind, "clip": clip.name, "source": clip.source,
             "frames": clip.observations.num_frames, "fps": clip.observations.fps,

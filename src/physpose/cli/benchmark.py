@@ -57,6 +57,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="give variants the motion-capture truth: only the diagnostic variants "
                         "truth-ik and dynamics-truth read it (how well the body and the physics "
                         "follow a motion a person really made)")
+    p.add_argument("--slow-motion", type=int, default=1, metavar="X",
+                   help="play motion capture as X times slow footage, not declared: the "
+                        "detector simulator sees each clip at X times --fps and the variants "
+                        "take its frames at --fps; every X-th frame is scored on the real "
+                        "clock. What a user who films slow motion and does not pass "
+                        "--slow-motion gets (motion capture only; default: 1)")
     p.add_argument("--paired-against", metavar="NAME",
                    help="with two or more variants, the one the others are compared with clip "
                         "by clip (mean +- standard error of the per-clip differences; default: "
@@ -76,7 +82,14 @@ def _materials(args: argparse.Namespace) -> tuple[list[Material], list[str]]:
             find_multiview_files(m.path)  # layout errors before any long work
         elif not m.path.is_file():
             raise PhysposeError(f"{m.kind} input is not a file", path=m.path)
-    return (given, []) if given else shared_material()
+    if given:
+        return given, []
+    found, skipped = shared_material()
+    if args.slow_motion != 1:  # only motion capture can be slowed
+        skipped += [f"{m.kind} {m.path}: --slow-motion plays motion capture only"
+                    for m in found if m.kind != "mocap"]
+        found = [m for m in found if m.kind == "mocap"]
+    return found, skipped
 
 
 def run(args: argparse.Namespace) -> int:
@@ -101,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
                                                   known_extrinsics=args.known_extrinsics,
                                                   known_height=args.known_height,
                                                   seed=args.seed, noiseless=args.noiseless,
-                                                  truth_input=args.truth_input))
+                                                  truth_input=args.truth_input,
+                                                  slow_motion=args.slow_motion))
     materials, skipped = _materials(args)
     for message in skipped:
         print(f"benchmark: skipping: {message}", file=sys.stderr)
