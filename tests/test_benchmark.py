@@ -11,7 +11,7 @@ from physpose.benchmark import VARIANTS, get_variant, register_variant, write_re
 from physpose.benchmark.baseline import level_ground_frame, solve_root_translation
 from physpose.benchmark.material import (Clip, Material, MaterialConfig, _observe_config,
                                          crop_mocap, load_clips, mocap_clip, uniform_fps)
-from physpose.benchmark.report import aggregate
+from physpose.benchmark.report import aggregate, render_markdown
 from physpose.benchmark.runner import BenchmarkConfig, results_document, run_clips, run_variant
 from physpose.benchmark.scoring import TRUTH_ROW, truth_record
 from physpose.cli import main
@@ -123,6 +123,13 @@ def test_cli_slow_motion_reaches_the_material_and_leaves_out_real_footage(tmp_pa
     assert seen["cfg"].material.slow_motion == 4
     assert [m.kind for m in seen["materials"]] == ["mocap"]
     assert any("b.mp4" in m and "motion capture only" in m for m in seen["skipped"])
+
+
+def test_the_report_says_the_footage_was_slowed():
+    slowed = render_markdown(results_document(
+        [], [], BenchmarkConfig(material=MaterialConfig(slow_motion=3))))
+    assert "3x slow footage, not declared" in slowed and "one frame in 3" in slowed
+    assert "slow footage" not in render_markdown(results_document([], [], BenchmarkConfig()))
 
 
 def test_slow_motion_is_refused_where_it_cannot_apply(tmp_path):

@@ -96,7 +96,7 @@ def render_markdown(doc: dict) -> str:
     slow = doc.get("config", {}).get("material", {}).get("slow_motion", 1)
     if slow != 1:
         lines += [f"Motion capture played as {slow}x slow footage, not declared to the "
-                  f"variants; every {slow}th frame scored, on the real clock.", ""]
+                  f"variants; one frame in {slow} scored, on the real clock.", ""]
     for message in doc.get("skipped", []):
         lines.append(f"- skipped: {message}")
     for failure in doc.get("failures", []):
