@@ -234,7 +234,7 @@ def mocap_clip(motion: MocapClip, cfg: MaterialConfig, name: str) -> Clip:
                   K=capture.camera_K)
     obs, step = capture.observations, cfg.slow_motion
     if step != 1:  # captured at fps x step, played at fps: the footage's clock runs slow
-        obs = obs.replace(fps=obs.fps / step, timestamps=np.asarray(obs.timestamps) * step)
+        obs = obs.on_real_clock(1.0 / step)  # the inverse of declaring it
     return Clip(kind="mocap", name=name, source=motion.source, observations=obs,
                 context=context, truth=truth, score_step=step,
                 timings_s={"simulate": time.perf_counter() - start})

@@ -26,14 +26,14 @@ _UP = np.array([0.0, 0.0, 1.0])
 def score_clip(clip: Clip, recon: Reconstruction) -> tuple[dict[str, float], dict[str, float]]:
     """(metrics, ground figures) of `recon` on `clip`; keys carry their units."""
     step = clip.score_step  # slowed footage: its frames on the real clock (material.py)
-    joints = recon.joints("best")[::step]
+    best = recon.joints("best")
+    joints = best[::step]
     # One contact threshold for kinematic and physics output: the paper's -15 mm for dynamics
     # compensates GHUM mesh vertices lying below its box feet; our sole points are the box's
     # own bottom face (skeleton.JOINT_POINTS), so a resting simulated foot sits at about -2 mm
     # and would never count as "in contact" at -15 mm (docs/metrics.md).
     contact = CONTACT_PRESETS["kinematics"]
-    est_2d = project(recon.as_filmed(recon.joints("best"))[::step], recon.camera_K,
-                     recon.camera_T_world2cam)
+    est_2d = project(recon.as_filmed(best)[::step], recon.camera_K, recon.camera_T_world2cam)
     if clip.truth is not None:
         metrics = evaluate(joints, clip.truth.joints[::step], fps=recon.fps, contact=contact,
                            T_est2common=recon.camera_T_world2cam,
