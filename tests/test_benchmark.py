@@ -11,6 +11,7 @@ from physpose.benchmark import VARIANTS, get_variant, register_variant, write_re
 from physpose.benchmark.baseline import level_ground_frame, solve_root_translation
 from physpose.benchmark.material import (Clip, Material, MaterialConfig, _observe_config,
                                          crop_mocap, load_clips, mocap_clip, uniform_fps)
+from physpose.benchmark.oracle import FOOT_LANDMARKS, SOLE_JOINTS, STANCE_HEIGHT, truth_on_body
 from physpose.benchmark.report import aggregate, render_markdown
 from physpose.benchmark.runner import BenchmarkConfig, results_document, run_clips, run_variant
 from physpose.benchmark.scoring import TRUTH_ROW, truth_record
@@ -386,6 +387,43 @@ def test_truth_ik_puts_the_recorded_motion_onto_the_body(truth_clip):
     # The stick figure is not physpose's skeleton, so IK cannot match it exactly.
     assert record["metrics"]["mpjpe_g_mm"] < 30.0
     assert record["metrics"]["mpjpe_2d_px"] < 10.0
+
+
+def _truth_fit_of(landmarks, T_world2cam, truth_clip):
+    return truth_on_body(landmarks, truth_clip.observations.fps, truth_clip.truth.K, T_world2cam)
+
+
+def test_truth_on_body_stands_where_the_recorded_feet_stood(truth_clip):
+    landmarks = truth_clip.context.truth_landmarks
+    kin = _truth_fit_of(landmarks, truth_clip.truth.T_world2cam, truth_clip)
+    # The body's heel and foot-index sites sit above its soles, the recording's on them: the
+    # IK'd body reaches lower, and its world's floor is moved down to where its soles stand.
+    feet = [LANDMARK_INDEX[n] for n in FOOT_LANDMARKS]
+    truth_low = landmarks[:, feet, 2].min(axis=1)
+    standing = truth_low < STANCE_HEIGHT
+    body_low = kin.joints[:, [JOINT_INDEX[n] for n in SOLE_JOINTS], 2].min(axis=1)
+    assert standing.sum() >= 5
+    level = np.median(truth_low[standing])
+    assert abs(np.median(body_low - (truth_low - level))) < 1e-9
+    assert abs(np.median(body_low[standing])) < 0.01
+    # Only the floor moved: in the camera the body is where the landmarks put it.
+    in_camera = transform_points(kin.T_world2cam, kin.landmarks)
+    truth_in_camera = transform_points(truth_clip.truth.T_world2cam, landmarks)
+    assert np.linalg.norm(in_camera - truth_in_camera, axis=-1).mean() < 0.03
+
+
+def test_truth_on_body_does_not_depend_on_where_the_recording_put_its_floor(truth_clip):
+    landmarks = truth_clip.context.truth_landmarks
+    T = truth_clip.truth.T_world2cam
+    kin = _truth_fit_of(landmarks, T, truth_clip)
+    # The same recording with its world 5 cm higher (floor, feet and camera moved together).
+    lowered = landmarks - np.array([0.0, 0.0, 0.05])
+    T_lowered = T.copy()
+    T_lowered[:3, 3] += T[:3, :3] @ np.array([0.0, 0.0, 0.05])
+    moved = _truth_fit_of(lowered, T_lowered, truth_clip)
+    np.testing.assert_allclose(moved.qpos, kin.qpos, atol=1e-6)
+    np.testing.assert_allclose(transform_points(moved.T_world2cam, moved.joints),
+                               transform_points(kin.T_world2cam, kin.joints), atol=1e-6)
 
 
 def test_dynamics_truth_follows_the_truth_with_physics(truth_clip):

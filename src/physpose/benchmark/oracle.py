@@ -19,11 +19,17 @@ from scipy.spatial.transform import Rotation
 from physpose.benchmark.variants import VariantContext, register_variant
 from physpose.errors import PhysposeError
 from physpose.fk import fk, fk_qpos
+from physpose.joints import JOINT_NAMES, LANDMARK_NAMES
 from physpose.kinematics.ik import inverse_kinematics
 from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
 from physpose.reconstruction import Reconstruction
 from physpose.shape import BodyShape, bone_lengths_from_landmarks
+
+
+SOLE_JOINTS = ("l_heel", "r_heel", "l_toe", "r_toe")  # the body's sole points
+FOOT_LANDMARKS = ("left_heel", "right_heel", "left_foot_index", "right_foot_index")
+STANCE_HEIGHT = 0.03  # m: the truth's lowest foot point under this stands (the floor's level)
 
 
 def truth_on_body(landmarks: np.ndarray, fps: float, camera_K: np.ndarray,
@@ -33,6 +39,18 @@ def truth_on_body(landmarks: np.ndarray, fps: float, camera_K: np.ndarray,
     The shape comes from bone lengths measured on the landmarks (mass from the stature's
     average build when None); the pose from inverse kinematics, root placed where it best
     matches the landmarks (median offset over the 33).
+
+    The fit's floor is where the body's soles stand as the truth's stand on its own. The
+    detector simulator puts the heel and foot-index landmarks on the recorded soles, while the
+    body's sit a quarter of its ankle height above its soles (skeleton.FOOT_LANDMARK_Z), so the
+    body that matches those landmarks reaches about a third of its ankle height further down
+    (1-5 cm into the truth's floor on the motion-capture clips). And a recording's floor is
+    not exactly at z = 0: its standing feet are up to 1-2 cm into it or above it. The fit's
+    world is therefore moved down by the median over frames of how much lower the body's
+    lowest sole point is than the truth's lowest foot point, plus the median height of the
+    truth's lowest foot point where it stands (under STANCE_HEIGHT), and its camera with it:
+    every point stays where it was in the camera, and the body stands on the floor where the
+    recorded feet stood.
     """
     shape = BodyShape.from_bone_lengths(bone_lengths_from_landmarks(landmarks), mass=mass)
     bones = shape.bones()
@@ -41,10 +59,20 @@ def truth_on_body(landmarks: np.ndarray, fps: float, camera_K: np.ndarray,
     root_pos = np.median(landmarks - np.asarray(relative), axis=1)
     quat_wxyz = Rotation.from_matrix(root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos = np.concatenate([root_pos, quat_wxyz, angles], axis=1)
+    joints, _ = fk_qpos(bones, qpos)
+    sole = [JOINT_NAMES.index(n) for n in SOLE_JOINTS]
+    feet = [LANDMARK_NAMES.index(n) for n in FOOT_LANDMARKS]
+    truth_low = landmarks[:, feet, 2].min(axis=1)
+    standing = truth_low[truth_low < STANCE_HEIGHT]
+    floor = float(np.median(joints[:, sole, 2].min(axis=1) - truth_low)
+                  + (np.median(standing) if len(standing) else 0.0))
+    qpos[:, 2] -= floor
+    T_world2cam = np.asarray(T_world2cam, float).copy()
+    T_world2cam[:3, 3] += T_world2cam[:3, :3] @ np.array([0.0, 0.0, floor])
     joints, sites = fk_qpos(bones, qpos)
     return KinematicFit(fps=fps, shape=shape, qpos=qpos, joints=joints, landmarks=sites,
                         camera_K=np.asarray(camera_K, float),
-                        T_world2cam=np.asarray(T_world2cam, float), variant="truth",
+                        T_world2cam=T_world2cam, variant="truth",
                         ground_estimated=False)
 
 
