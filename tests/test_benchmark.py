@@ -377,7 +377,7 @@ def test_truth_input_reaches_only_the_context_it_is_asked_for(clip, truth_clip):
 
 
 def test_truth_variants_refuse_clips_without_the_truth(clip):
-    for name in ("truth-ik", "dynamics-truth"):
+    for name in ("truth-ik", "truth-reference", "dynamics-truth"):
         with pytest.raises(PhysposeError, match="--truth-input"):
             get_variant(name)(clip.observations, clip.context)
 
@@ -424,6 +424,16 @@ def test_truth_on_body_does_not_depend_on_where_the_recording_put_its_floor(trut
     np.testing.assert_allclose(moved.qpos, kin.qpos, atol=1e-6)
     np.testing.assert_allclose(transform_points(moved.T_world2cam, moved.joints),
                                transform_points(kin.T_world2cam, kin.joints), atol=1e-6)
+
+
+def test_truth_reference_is_the_truth_prepared_for_the_physics(truth_clip):
+    ik = run_variant("truth-ik", truth_clip)["metrics"]
+    record = run_variant("truth-reference", truth_clip)
+    metrics = record["metrics"]
+    # On the floor with flat standing feet and low-passed: near the IK'd truth, not on it.
+    assert metrics["penetration_mean_mm"] < 5.0
+    assert ik["mpjpe_g_mm"] < metrics["mpjpe_g_mm"] < ik["mpjpe_g_mm"] + 20.0
+    assert "restarts" not in metrics
 
 
 def test_dynamics_truth_follows_the_truth_with_physics(truth_clip):

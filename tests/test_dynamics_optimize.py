@@ -13,7 +13,7 @@ from physpose.dynamics import TERMS, DynamicsConfig, optimize_dynamics
 from physpose.dynamics import checkpoint
 from physpose.dynamics.balance import BalanceGains
 from physpose.dynamics.ilqr import RefineConfig
-from physpose.dynamics.optimize import searched_dofs
+from physpose.dynamics.optimize import foot_heights, reference_motion, searched_dofs
 from physpose.dynamics.search import cma_strategy, window_seed
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.dynamics.windows import blend_weights, plan_windows
@@ -38,6 +38,23 @@ def clip():
 def run(clip, cfg=TINY, **kwargs):
     body, fit, obs = clip
     return optimize_dynamics(body, fit, obs, cfg, progress=False, **kwargs)
+
+
+def test_reference_motion_is_the_estimate_prepared_for_the_windows(clip):
+    body, fit, obs = clip
+    ref = reference_motion(body, fit, obs, TINY)
+    assert ref.shape == fit.qpos.shape and np.isfinite(ref).all()
+    # Low-passed: the estimate's 1.5 Hz hinge error passes nearly whole through 0.1 s knots,
+    # so the reference stays near it (the legs of flattened standing feet move most); the
+    # standing body is put on its floor.
+    hinges = np.abs(ref[:, 7:] - fit.qpos[:, 7:])
+    assert hinges.mean() < 0.005 and hinges.max() < 0.06
+    assert np.abs(ref[:, :3] - fit.qpos[:, :3]).max() < 0.03
+    assert (foot_heights(body.model, ref, body.foot_geom_ids) > -0.005).all()
+    # Without the preparation steps the reference is the estimate low-passed only.
+    raw = reference_motion(body, fit, obs, dataclasses.replace(TINY, ground_reference=False,
+                                                               flat_stance=False))
+    assert not np.allclose(raw, ref)
 
 
 def test_result_shapes_and_records(clip):

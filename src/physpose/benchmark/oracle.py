@@ -4,9 +4,12 @@
 truth's 33 synthesised landmarks, then inverse kinematics of those landmarks. What it scores
 is the body's own representation error. ``dynamics-truth`` runs the trajectory optimisation
 (default preset) with that motion as its kinematic input, so what it loses is the physics
-stage's own error, not the estimate's. Combine with ``--noiseless`` to give the image term
-clean detections too. These are oracles: they answer "how well can this body and search
-follow a motion a person really made", they are not estimators.
+stage's own error, not the estimate's. ``truth-reference`` is what ``dynamics-truth`` is asked
+to follow: that motion on the floor, its standing feet laid flat and low-passed (no physics), so
+the two split the physics stage's loss into its preparation and its simulation. Combine with
+``--noiseless`` to give the image term clean detections too. These are oracles: they answer
+"how well can this body and search follow a motion a person really made", they are not
+estimators.
 """
 
 from __future__ import annotations
@@ -107,5 +110,18 @@ def dynamics_truth_variant(obs: Observations, context: VariantContext) -> Recons
                         "dynamics-truth")
 
 
+def truth_reference_variant(obs: Observations, context: VariantContext) -> Reconstruction:
+    """The truth on the body as the default preset's windows are asked to follow it."""
+    from physpose.dynamics.config import PRESETS  # noqa: PLC0415 (keeps the registry light)
+    from physpose.dynamics.variants import reference_fit  # noqa: PLC0415
+
+    start = time.perf_counter()
+    recon = reference_fit(_truth_fit(obs, context, "truth-reference"), obs, PRESETS["fast"],
+                          "truth-reference")
+    return recon.replace(meta=dict(recon.meta,
+                                   timings_s={"kinematics": time.perf_counter() - start}))
+
+
 register_variant("truth-ik", truth_ik_variant)
+register_variant("truth-reference", truth_reference_variant)
 register_variant("dynamics-truth", dynamics_truth_variant)

@@ -55,8 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "input, so what a variant still loses is its own error")
     p.add_argument("--truth-input", action="store_true",
                    help="give variants the motion-capture truth: only the diagnostic variants "
-                        "truth-ik and dynamics-truth read it (how well the body and the physics "
-                        "follow a motion a person really made)")
+                        "truth-ik, truth-reference and dynamics-truth read it (how well the body "
+                        "and the physics follow a motion a person really made)")
     p.add_argument("--slow-motion", type=int, default=1, metavar="X",
                    help="play motion capture as X times slow footage, not declared: the "
                         "detector simulator sees each clip at X times --fps and the variants "

@@ -517,6 +517,18 @@ def run_inputs(body: Body, kin: KinematicFit, obs: Observations, travels: bool =
     return inputs
 
 
+def reference_motion(body: Body, kinematic_fit: KinematicFit, observations: Observations,
+                     config: DynamicsConfig = DynamicsConfig()) -> np.ndarray:
+    """(T, 55) qpos at the frames: the motion the windows are asked to follow, i.e. the
+    estimate put onto the floor, its standing feet laid flat (``flat_stance``) and low-passed
+    (``reference_knot_spacing``), moved on by a travelling camera's path where ``camera``
+    says so. No physics: it tells what the physics stage's preparation alone does to the
+    estimate (the benchmark's ``dynamics-reference`` and ``truth-reference``)."""
+    _check_inputs(kinematic_fit, observations)
+    setup = _setup(sim_model(body), kinematic_fit, observations, config)
+    return setup.reference.qpos[setup.frame_steps]
+
+
 def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Observations,
                       config: DynamicsConfig = DynamicsConfig(), *,
                       checkpoint_dir: str | Path | None = None, checkpoints: bool = True,

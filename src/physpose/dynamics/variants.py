@@ -15,7 +15,9 @@ and ``dynamics-ilqr-image``: the search alone (no iLQR refinement), the
 default of stop 40 (two retries, every attempt of a window refined), the refinement as it was
 before stop 40 (no image term), and iLQR instead of the search; all with two retries, as
 measured before stop 41. ``dynamics-no-hopeless-retry``: the default without a retry after a
-first search that misses by more than 0.5 m (stop 42). The benchmark's ``--seed`` offsets every
+first search that misses by more than 0.5 m (stop 42). ``dynamics-reference``: no physics, the
+SO+GT estimate as the default preset's windows are asked to follow it (on the floor, standing
+feet flat, low-passed; stop 60). The benchmark's ``--seed`` offsets every
 variant's CMA-ES seed (``seeded``). Window checkpoints go to the stage cache, so an interrupted
 benchmark resumes its dynamics runs.
 """
@@ -31,7 +33,8 @@ from physpose.body import BodyConfig, build_body
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.dynamics.config import ABLATIONS, PRESETS, DynamicsConfig, ablated
 from physpose.dynamics.ilqr import RefineConfig
-from physpose.dynamics.optimize import optimize_dynamics
+from physpose.dynamics.optimize import optimize_dynamics, reference_motion
+from physpose.fk import fk_qpos
 from physpose.kinematics.config import KinematicConfig
 from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
@@ -71,6 +74,30 @@ def simulate_fit(kin: KinematicFit, kinematics_s: float, obs: Observations,
     return recon.replace(**phys.reconstruction_fields(), meta=meta)
 
 
+def reference_fit(kin: KinematicFit, obs: Observations, config: DynamicsConfig,
+                  name: str) -> Reconstruction:
+    """The motion the physics is asked to follow (``optimize.reference_motion``) as a
+    kinematic reconstruction: what the physics stage's preparation alone does to ``kin``."""
+    body = build_body(kin.shape)
+    qpos = reference_motion(body, kin, obs, config)
+    joints, landmarks = fk_qpos(kin.shape.bones(), qpos)
+    moved = dataclasses.replace(kin, qpos=qpos, joints=joints, landmarks=landmarks)
+    recon = moved.to_reconstruction(obs, body_mjcf=body.xml)
+    return recon.replace(meta=dict(recon.meta, variant=name))
+
+
+def reference_variant(obs: Observations, context: VariantContext) -> Reconstruction:
+    """The SO+GT estimate as the default preset's windows are asked to follow it (no physics)."""
+    from physpose.kinematics.fit import fit_kinematics  # noqa: PLC0415 (heavy JAX import)
+
+    start = time.perf_counter()
+    kin = fit_kinematics(obs, KinematicConfig.preset("SO+GT"), camera_K=context.camera_K,
+                         height=context.person_height)
+    recon = reference_fit(kin, obs, PRESETS["fast"], "dynamics-reference")
+    return recon.replace(meta=dict(recon.meta,
+                                   timings_s={"kinematics": time.perf_counter() - start}))
+
+
 def _variant(kinematic_variant: str, config: DynamicsConfig, name: str,
              body_config: BodyConfig = BodyConfig()):
     def fn(obs: Observations, context: VariantContext) -> Reconstruction:
@@ -88,6 +115,7 @@ SEARCH_ONLY = dataclasses.replace(PRESETS["fast"], refine=RefineConfig(iteration
 FULL_OBJECTIVE = dataclasses.replace(SEARCH_ONLY, weights=ObjectiveWeights())
 
 register_variant("dynamics", _variant("SO+GT", PRESETS["fast"], "dynamics"))
+register_variant("dynamics-reference", reference_variant)
 register_variant("dynamics-so", _variant("SO", PRESETS["fast"], "dynamics-so"))
 # The paper's budget (2000 iterations x 100 samples per window): 11-24 min per window
 # measured on 2-core machines, so for a short clip or a larger machine.
