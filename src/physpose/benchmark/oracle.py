@@ -48,7 +48,7 @@ def truth_on_body(landmarks: np.ndarray, fps: float, camera_K: np.ndarray,
     body's sit a quarter of its ankle height above its soles (skeleton.FOOT_LANDMARK_Z), so the
     body that matches those landmarks reaches about a third of its ankle height further down
     (1-5 cm into the truth's floor on the motion-capture clips). And a recording's floor is
-    not exactly at z = 0: its standing feet are up to 1-2 cm into it or above it. The fit's
+    not exactly at z = 0: on the CMU clips its standing feet reach about 1 cm into it. The fit's
     world is therefore moved down by the median over frames of how much lower the body's
     lowest sole point is than the truth's lowest foot point, plus the median height of the
     truth's lowest foot point where it stands (under STANCE_HEIGHT), and its camera with it:
