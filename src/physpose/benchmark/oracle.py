@@ -62,17 +62,17 @@ def truth_on_body(landmarks: np.ndarray, fps: float, camera_K: np.ndarray,
     root_pos = np.median(landmarks - np.asarray(relative), axis=1)
     quat_wxyz = Rotation.from_matrix(root_rot).as_quat()[:, [3, 0, 1, 2]]
     qpos = np.concatenate([root_pos, quat_wxyz, angles], axis=1)
-    joints, _ = fk_qpos(bones, qpos)
+    joints, sites = fk_qpos(bones, qpos)
     sole = [JOINT_NAMES.index(n) for n in SOLE_JOINTS]
     feet = [LANDMARK_NAMES.index(n) for n in FOOT_LANDMARKS]
     truth_low = landmarks[:, feet, 2].min(axis=1)
     standing = truth_low[truth_low < STANCE_HEIGHT]
     floor = float(np.median(joints[:, sole, 2].min(axis=1) - truth_low)
                   + (np.median(standing) if len(standing) else 0.0))
-    qpos[:, 2] -= floor
+    for points in (qpos[:, :3], joints, sites):  # a translation: every point moves with the root
+        points[..., 2] -= floor
     T_world2cam = np.asarray(T_world2cam, float).copy()
     T_world2cam[:3, 3] += T_world2cam[:3, :3] @ np.array([0.0, 0.0, floor])
-    joints, sites = fk_qpos(bones, qpos)
     return KinematicFit(fps=fps, shape=shape, qpos=qpos, joints=joints, landmarks=sites,
                         camera_K=np.asarray(camera_K, float),
                         T_world2cam=T_world2cam, variant="truth",
@@ -116,10 +116,9 @@ def truth_reference_variant(obs: Observations, context: VariantContext) -> Recon
     from physpose.dynamics.variants import reference_fit  # noqa: PLC0415
 
     start = time.perf_counter()
-    recon = reference_fit(_truth_fit(obs, context, "truth-reference"), obs, PRESETS["fast"],
-                          "truth-reference")
-    return recon.replace(meta=dict(recon.meta,
-                                   timings_s={"kinematics": time.perf_counter() - start}))
+    kin = _truth_fit(obs, context, "truth-reference")
+    return reference_fit(kin, time.perf_counter() - start, obs, PRESETS["fast"],
+                         "truth-reference")
 
 
 register_variant("truth-ik", truth_ik_variant)

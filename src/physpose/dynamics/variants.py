@@ -48,17 +48,24 @@ def seeded(config: DynamicsConfig, context: VariantContext) -> DynamicsConfig:
     return dataclasses.replace(config, seed=config.seed + context.seed)
 
 
-def run_dynamics_variant(obs: Observations, context: VariantContext, kinematic_variant: str,
-                         config: DynamicsConfig, name: str,
-                         body_config: BodyConfig = BodyConfig()) -> Reconstruction:
-    """Kinematic fit of the named variant, then dynamics; both fields in the reconstruction."""
+def _timed_fit(obs: Observations, context: VariantContext, kinematic_variant: str
+               ) -> tuple[KinematicFit, float]:
+    """The named variant's kinematic fit (the intrinsics and stature the benchmark gives)
+    and the seconds it took."""
     from physpose.kinematics.fit import fit_kinematics  # noqa: PLC0415 (heavy JAX import)
 
     start = time.perf_counter()
     kin = fit_kinematics(obs, KinematicConfig.preset(kinematic_variant),
                          camera_K=context.camera_K, height=context.person_height)
-    return simulate_fit(kin, time.perf_counter() - start, obs, context, config, name,
-                        body_config)
+    return kin, time.perf_counter() - start
+
+
+def run_dynamics_variant(obs: Observations, context: VariantContext, kinematic_variant: str,
+                         config: DynamicsConfig, name: str,
+                         body_config: BodyConfig = BodyConfig()) -> Reconstruction:
+    """Kinematic fit of the named variant, then dynamics; both fields in the reconstruction."""
+    kin, kinematics_s = _timed_fit(obs, context, kinematic_variant)
+    return simulate_fit(kin, kinematics_s, obs, context, config, name, body_config)
 
 
 def simulate_fit(kin: KinematicFit, kinematics_s: float, obs: Observations,
@@ -74,28 +81,26 @@ def simulate_fit(kin: KinematicFit, kinematics_s: float, obs: Observations,
     return recon.replace(**phys.reconstruction_fields(), meta=meta)
 
 
-def reference_fit(kin: KinematicFit, obs: Observations, config: DynamicsConfig,
-                  name: str) -> Reconstruction:
+def reference_fit(kin: KinematicFit, kinematics_s: float, obs: Observations,
+                  config: DynamicsConfig, name: str) -> Reconstruction:
     """The motion the physics is asked to follow (``optimize.reference_motion``) as a
-    kinematic reconstruction: what the physics stage's preparation alone does to ``kin``."""
+    kinematic reconstruction of a fit that took kinematics_s seconds: what the physics
+    stage's preparation alone does to ``kin``."""
+    start = time.perf_counter()
     body = build_body(kin.shape)
     qpos = reference_motion(body, kin, obs, config)
     joints, landmarks = fk_qpos(kin.shape.bones(), qpos)
     moved = dataclasses.replace(kin, qpos=qpos, joints=joints, landmarks=landmarks)
     recon = moved.to_reconstruction(obs, body_mjcf=body.xml)
-    return recon.replace(meta=dict(recon.meta, variant=name))
+    meta = dict(recon.meta, variant=name,
+                timings_s={"kinematics": kinematics_s, "reference": time.perf_counter() - start})
+    return recon.replace(meta=meta)
 
 
 def reference_variant(obs: Observations, context: VariantContext) -> Reconstruction:
     """The SO+GT estimate as the default preset's windows are asked to follow it (no physics)."""
-    from physpose.kinematics.fit import fit_kinematics  # noqa: PLC0415 (heavy JAX import)
-
-    start = time.perf_counter()
-    kin = fit_kinematics(obs, KinematicConfig.preset("SO+GT"), camera_K=context.camera_K,
-                         height=context.person_height)
-    recon = reference_fit(kin, obs, PRESETS["fast"], "dynamics-reference")
-    return recon.replace(meta=dict(recon.meta,
-                                   timings_s={"kinematics": time.perf_counter() - start}))
+    kin, kinematics_s = _timed_fit(obs, context, "SO+GT")
+    return reference_fit(kin, kinematics_s, obs, PRESETS["fast"], "dynamics-reference")
 
 
 def _variant(kinematic_variant: str, config: DynamicsConfig, name: str,
