@@ -162,7 +162,7 @@ def stubbed_dynamics(monkeypatch):
         raise _Stop
 
     monkeypatch.setattr(kinematics_fit, "fit_kinematics", fit)
-    monkeypatch.setattr(oracle, "_truth_fit", lambda *args: kin)
+    monkeypatch.setattr(oracle, "_timed_truth_fit", lambda *args: (kin, 0.0))
     monkeypatch.setattr(dynamics_variants, "optimize_dynamics", optimise)
     return stub
 

@@ -79,23 +79,26 @@ def truth_on_body(landmarks: np.ndarray, fps: float, camera_K: np.ndarray,
                         ground_estimated=False)
 
 
-def _truth_fit(obs: Observations, context: VariantContext, name: str) -> KinematicFit:
+def _timed_truth_fit(obs: Observations, context: VariantContext, name: str
+                     ) -> tuple[KinematicFit, float]:
+    """The truth put onto the body (`truth_on_body`) for variant ``name``, and the seconds it
+    took (as dynamics.variants._timed_fit gives the estimate's)."""
     if context.truth_landmarks is None or context.camera_K is None \
             or context.truth_T_world2cam is None:
         raise PhysposeError(f"variant {name} needs the ground truth, which this clip does not "
                             "give variants", path=obs.source,
                             remedy="run it on motion capture with --truth-input")
-    return truth_on_body(context.truth_landmarks, obs.fps, context.camera_K,
-                         context.truth_T_world2cam)
+    start = time.perf_counter()
+    kin = truth_on_body(context.truth_landmarks, obs.fps, context.camera_K,
+                        context.truth_T_world2cam)
+    return kin, time.perf_counter() - start
 
 
 def truth_ik_variant(obs: Observations, context: VariantContext) -> Reconstruction:
     """The truth, put onto the body by inverse kinematics (no physics)."""
-    start = time.perf_counter()
-    kin = _truth_fit(obs, context, "truth-ik")
+    kin, kinematics_s = _timed_truth_fit(obs, context, "truth-ik")
     recon = kin.to_reconstruction(obs)
-    meta = dict(recon.meta, variant="truth-ik",
-                timings_s={"kinematics": time.perf_counter() - start})
+    meta = dict(recon.meta, variant="truth-ik", timings_s={"kinematics": kinematics_s})
     return recon.replace(meta=meta)
 
 
@@ -104,10 +107,8 @@ def dynamics_truth_variant(obs: Observations, context: VariantContext) -> Recons
     from physpose.dynamics.config import PRESETS  # noqa: PLC0415 (keeps the registry light)
     from physpose.dynamics.variants import simulate_fit  # noqa: PLC0415
 
-    start = time.perf_counter()
-    kin = _truth_fit(obs, context, "dynamics-truth")
-    return simulate_fit(kin, time.perf_counter() - start, obs, context, PRESETS["fast"],
-                        "dynamics-truth")
+    kin, kinematics_s = _timed_truth_fit(obs, context, "dynamics-truth")
+    return simulate_fit(kin, kinematics_s, obs, context, PRESETS["fast"], "dynamics-truth")
 
 
 def truth_reference_variant(obs: Observations, context: VariantContext) -> Reconstruction:
@@ -115,10 +116,8 @@ def truth_reference_variant(obs: Observations, context: VariantContext) -> Recon
     from physpose.dynamics.config import PRESETS  # noqa: PLC0415 (keeps the registry light)
     from physpose.dynamics.variants import reference_fit  # noqa: PLC0415
 
-    start = time.perf_counter()
-    kin = _truth_fit(obs, context, "truth-reference")
-    return reference_fit(kin, time.perf_counter() - start, obs, PRESETS["fast"],
-                         "truth-reference")
+    kin, kinematics_s = _timed_truth_fit(obs, context, "truth-reference")
+    return reference_fit(kin, kinematics_s, obs, PRESETS["fast"], "truth-reference")
 
 
 register_variant("truth-ik", truth_ik_variant)
