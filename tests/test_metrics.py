@@ -188,6 +188,17 @@ def test_fallen_counts_frames_with_the_head_below_half_the_references():
     assert "fallen_pct" not in m.evaluate(lying, fps=FPS)
 
 
+def test_a_head_only_a_little_lower_than_a_reference_down_on_the_floor_has_not_fallen():
+    head = JOINT_INDEX["head"]
+    ref = motion(np.zeros((4, 3)))
+    est = ref.copy()
+    ref[:, head, 2] = (0.15, 0.15, 0.7, 1.5)   # rolling on the floor, then crouching, standing
+    est[:, head, 2] = (0.06, 0.14, 0.3, 0.7)
+    # frame 0: under half the reference's height, but only 9 cm lower (both on the floor);
+    # frames 2 and 3: under half and 40-80 cm lower
+    assert m.fallen(est, ref) == pytest.approx(50.0)
+
+
 def test_project_matches_pinhole_model():
     K = np.array([[800.0, 0, 320], [0, 800.0, 240], [0, 0, 1]])
     uv = m.project(np.array([[0.5, -0.25, 2.0]]), K, np.eye(4))

@@ -17,7 +17,8 @@ from physpose.joints import JOINT_NAMES
 
 SKATE_DISTANCE = 0.02  # m, a foot in contact moving further than this between frames skates
 FLOAT_DISTANCE = 0.02  # m, a foot out of contact but lower than this floats
-FALL_RATIO = 0.5  # a head lower than this fraction of the reference's head height has fallen
+FALL_RATIO = 0.5  # a head lower than this fraction of the reference's head height has fallen ...
+FALL_MARGIN = 0.2  # m, ... if it is also at least this much (about a head's height) lower
 SIDES = ("l", "r")
 
 
@@ -206,15 +207,19 @@ def ground_penetration(joints: np.ndarray, cfg: ContactConfig = KINEMATIC_CONTAC
 
 
 def fallen(joints: np.ndarray, reference: np.ndarray, joint_names=JOINT_NAMES) -> float:
-    """% of frames in which the head is lower than FALL_RATIO x the reference's head height.
+    """% of frames in which the head is lower than FALL_RATIO x the reference's head height and
+    at least FALL_MARGIN lower than it.
 
     Both motions stand on their own ground z = 0, so no alignment is needed: a cartwheel in
     the reference lowers the threshold with it, a body lying on the floor where the reference
-    stands counts.
+    stands counts. The margin keeps a reference that is itself down on the floor from counting
+    its own pose as a fall: a rolling body's head 15 cm above the floor halves to 7.5 cm, less
+    than a head's radius, so a second body rolling beside it would count by the ratio alone.
     """
     _check(joints, reference)
     head = _index(joint_names, "head")
-    return float(100.0 * (joints[:, head, 2] < FALL_RATIO * reference[:, head, 2]).mean())
+    est, ref = joints[:, head, 2], reference[:, head, 2]
+    return float(100.0 * ((est < FALL_RATIO * ref) & (est < ref - FALL_MARGIN)).mean())
 
 
 def evaluate(est: np.ndarray, gt: np.ndarray | None = None, *, fps: float,
