@@ -60,7 +60,10 @@ def test_feet_above_the_floor_for_longer_than_a_jump(standing):
 def test_invalid_windows_are_merged_and_every_warning_names_frames_and_a_remedy():
     windows = [{"frames": [0, 24], "valid": False}, {"frames": [10, 34], "valid": False},
                {"frames": [20, 44], "valid": True}, {"frames": [50, 74], "valid": False}]
-    assert diagnostics.invalid_window_runs(windows) == [(0, 34), (50, 74)]
+    # independent windows are cross-faded over their whole spans
+    assert diagnostics.invalid_window_runs(windows, sequential=False) == [(0, 34), (50, 74)]
+    # sequential windows give the output only their frames up to the next window's start
+    assert diagnostics.invalid_window_runs(windows) == [(0, 19), (50, 74)]
     assert diagnostics.jumps_message([], 25.0) is None
     assert "142 (5.68 s)" in diagnostics.jumps_message([142], 25.0)
     assert "--start/--end" in diagnostics.jumps_message([142], 25.0)
@@ -70,6 +73,17 @@ def test_invalid_windows_are_merged_and_every_warning_names_frames_and_a_remedy(
     unsupported = diagnostics.raised_message([(0, 142, 1.8)], 25.0, supported=False)
     assert "no support was added" in unsupported and "puts a box" not in unsupported
     assert "joints_kinematic" in diagnostics.invalid_message([(0, 34)], 25.0)
+
+
+def test_a_sequential_window_cut_short_counts_only_the_frames_it_kept():
+    """Three windows that found no valid sample, each cut after 5 frames and followed by one
+    from the cut (as on Sports2D's demo): frames 0-14 came from them, not their look-ahead."""
+    windows = [{"frames": [0, 25], "valid": False, "cut_at": 5},
+               {"frames": [5, 35], "valid": False, "cut_at": 10},
+               {"frames": [10, 45], "valid": False, "cut_at": 15},
+               {"frames": [15, 55], "valid": True}, {"frames": [20, 65], "valid": True}]
+    assert diagnostics.invalid_window_runs(windows) == [(0, 14)]
+    assert diagnostics.invalid_window_runs(windows, sequential=False) == [(0, 45)]
     recon = SimpleNamespace(fps=25.0, slow_motion=1.0, meta={"diagnostics": {
         "person_jumps": [142], "raised": [[0, 142, 1.8]], "invalid_windows": []}})
     lines = diagnostics_lines(recon)

@@ -161,10 +161,26 @@ def raised_runs(joints: np.ndarray, fps: float) -> list[tuple[int, int, float]]:
     return out
 
 
-def invalid_window_runs(windows: list[dict]) -> list[tuple[int, int]]:
-    """(first, last) frames covered by dynamics windows with no valid sample, merged."""
-    spans = sorted(tuple(w["frames"]) for w in windows
-                   if isinstance(w, dict) and w.get("valid") is False)
+def invalid_window_runs(windows: list[dict], sequential: bool = True
+                        ) -> list[tuple[int, int]]:
+    """(first, last) frames that dynamics windows with no valid sample gave the output, merged.
+
+    windows: the run's window records, in order (``frames``: the planned [first, last]).
+    Sequential windows each give the output only their frames up to the next window's start
+    (a window cut where it strayed is followed by one starting at the cut), so a window's
+    look-ahead past that is not counted; independent windows are cross-faded over their whole
+    spans, so each counts whole.
+    """
+    records = [w for w in windows if isinstance(w, dict) and "frames" in w]
+    spans = []
+    for k, w in enumerate(records):
+        if w.get("valid") is not False:
+            continue
+        first, last = w["frames"]
+        if sequential and k + 1 < len(records):
+            last = min(last, records[k + 1]["frames"][0] - 1)
+        spans.append((first, last))
+    spans.sort()
     merged: list[list[int]] = []
     for a, b in spans:
         if merged and a <= merged[-1][1] + 1:

@@ -173,7 +173,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     phys = optimize_dynamics(body, kin, obs, config.dynamics, checkpoint_dir=windows,
                              progress=progress)
     lap("dynamics")
-    invalid = diagnostics.invalid_window_runs(phys.windows)
+    invalid = diagnostics.invalid_window_runs(phys.windows,
+                                              sequential=not config.dynamics.independent)
     _warn(diagnostics.invalid_message(invalid, kin.fps))
     unrecorded = diagnostics.unrecorded_force_runs(phys.grf)
     _warn(diagnostics.unrecorded_forces_message(unrecorded, kin.fps))
