@@ -73,6 +73,14 @@ def test_invalid_windows_are_merged_and_every_warning_names_frames_and_a_remedy(
     unsupported = diagnostics.raised_message([(0, 142, 1.8)], 25.0, supported=False)
     assert "no support was added" in unsupported and "puts a box" not in unsupported
     assert "joints_kinematic" in diagnostics.invalid_message([(0, 34)], 25.0)
+    recon = SimpleNamespace(fps=25.0, slow_motion=1.0, meta={"diagnostics": {
+        "person_jumps": [142], "raised": [[0, 142, 1.8]], "invalid_windows": []}})
+    lines = diagnostics_lines(recon)
+    assert len(lines) == 2 and "142" in lines[0] and "1.80 m up" in lines[1]
+    assert "no support was added" in lines[1]
+    recon.meta["diagnostics"]["supports"] = [[0.0, 0.0, 0.9, 1.5, 1.9, 1.8]]
+    assert "puts a box" in diagnostics_lines(recon)[1]
+    assert diagnostics_lines(SimpleNamespace(fps=25.0, slow_motion=1.0, meta={})) == []
 
 
 def test_a_sequential_window_cut_short_counts_only_the_frames_it_kept():
@@ -84,14 +92,6 @@ def test_a_sequential_window_cut_short_counts_only_the_frames_it_kept():
                {"frames": [15, 55], "valid": True}, {"frames": [20, 65], "valid": True}]
     assert diagnostics.invalid_window_runs(windows) == [(0, 14)]
     assert diagnostics.invalid_window_runs(windows, sequential=False) == [(0, 45)]
-    recon = SimpleNamespace(fps=25.0, slow_motion=1.0, meta={"diagnostics": {
-        "person_jumps": [142], "raised": [[0, 142, 1.8]], "invalid_windows": []}})
-    lines = diagnostics_lines(recon)
-    assert len(lines) == 2 and "142" in lines[0] and "1.80 m up" in lines[1]
-    assert "no support was added" in lines[1]
-    recon.meta["diagnostics"]["supports"] = [[0.0, 0.0, 0.9, 1.5, 1.9, 1.8]]
-    assert "puts a box" in diagnostics_lines(recon)[1]
-    assert diagnostics_lines(SimpleNamespace(fps=25.0, slow_motion=1.0, meta={})) == []
 
 
 def test_forces_missing_from_resumed_windows_are_reported():
