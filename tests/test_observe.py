@@ -12,6 +12,7 @@ from synthetic_video import make_noise_video
 from physpose.diagnostics import person_jumps
 from physpose.errors import PhysposeError
 from physpose.joints import LANDMARK_INDEX as LM
+from physpose.mask_quality import band_width
 from physpose.observe import (ObserveConfig, PoseDetector, _detect_all, downsample_mask,
                               fill_gaps, mask_shape, observe)
 from physpose.video import plan_frames, probe, read_frames
@@ -141,6 +142,13 @@ def test_real_clip_mask_covers_the_person(cam01):
     assert cam01.masks.mean() < 0.3 * 255  # the person does not fill the frame
 
 
+def test_real_clip_masks_are_crisp_outlines(cam01):
+    """A person MediaPipe is sure of has a mask whose unsure band is about a pixel wide (stop
+    63: at most 1.5 px on cam01), well inside the bound that leaves detections out."""
+    width = band_width(cam01.masks[cam01.detected])
+    assert np.nanmax(width) < 2.0 < ObserveConfig().unsure_mask_band
+
+
 def _world_axes_match_opencv(obs) -> tuple[float, float, float]:
     """(corr of world x with image x, same for y, fraction of frames with the nose in front of
     the chest under a right-handed frame)."""
@@ -220,6 +228,20 @@ def test_cache_hit_for_same_settings_miss_when_they_change(pose2sim_demo, tmp_pa
     copy.write_bytes(video.read_bytes())
     moved = observe(copy, cfg, progress=False)
     assert len(calls) == 15 and moved.source == str(copy)  # keyed by content, not by name
+
+
+def test_detections_torn_by_a_sun_flare_are_left_out(sports2d_demo):
+    """Sports2D's demo starts with the man in front of a sun flare: MediaPipe's first
+    detections (frames 3, 6 and 7; none in 0-2, 4 and 5) put his legs on the flare, and their
+    masks are blurred blobs. They are left out, so the person is first seen in frame 8."""
+    cfg = ObserveConfig(end=2.0, use_cache=False)   # shorter, and the crop pass takes over
+    raw = observe(sports2d_demo, dataclasses.replace(cfg, unsure_mask_band=0), progress=False)
+    assert np.flatnonzero(raw.detected)[:3].tolist() == [3, 6, 7]
+    assert band_width(raw.masks[[3, 6, 7]]).min() > 3.0
+    assert np.nanmax(band_width(raw.masks[raw.detected][3:])) < 2.0
+    kept = observe(sports2d_demo, cfg, progress=False)
+    assert kept.seen_span()[0] == 8
+    np.testing.assert_array_equal(kept.keypoints2d[8:], raw.keypoints2d[8:])
 
 
 @pytest.mark.slow

@@ -253,16 +253,17 @@ def rate_message(fps: float) -> str | None:
 
 
 def trimmed_message(trimmed: list[int] | None, total: int, fps: float) -> str | None:
-    """A note on the frames left out before and after the person is in view, or None.
-    trimmed: [first, last] frames kept of `total`."""
+    """A note on the frames left out before and after the person is seen (no detection, or
+    only ones observe left out as torn), or None. trimmed: [first, last] frames kept of
+    `total`."""
     if not trimmed:
         return None
     first, last = trimmed
     parts = [f"before {first / fps:.2f} s" if first > 0 else "",
              f"after {(last + 1) / fps:.2f} s" if last < total - 1 else ""]
-    return (f"input: no person in view {' or '.join(p for p in parts if p)} (of {total / fps:.2f} "
-            f"s analysed): only frames {first}-{last} are reconstructed (the output's frame_indices "
-            "and times say which video frames those are)")
+    return (f"input: the person is not seen {' or '.join(p for p in parts if p)} (of "
+            f"{total / fps:.2f} s analysed): only frames {first}-{last} are reconstructed (the "
+            "output's frame_indices and times say which video frames those are)")
 
 
 def camera_message(kind: str | None) -> str | None:

@@ -35,6 +35,10 @@ background (`camera_motion.py`) and the detections are mapped into the middle fr
 maps back to each frame's pixels. A camera that also travels is only reported
 (`Observations.camera_motion` "moving").
 
+A detection whose person mask is a blurred blob rather than a person's outline (the landmark
+model was handed a poor region: glare, a first detection off the person) has torn landmarks;
+it is left out (`unsure_mask_band`, mask_quality.py) before the gaps are filled.
+
 Frames without a detection are flagged; gaps of at most `max_gap_frames` between two detected
 frames are filled by linear interpolation (positions, confidences, world landmarks and masks)
 and flagged `interpolated`. Results are cached
@@ -59,11 +63,12 @@ from physpose.camera_motion import estimate_camera_motion, stabilize
 from physpose.diagnostics import image_box_corners, person_jumps
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
+from physpose.mask_quality import unsure_frames
 from physpose.observations import Observations
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 5  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 6  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 _log = logging.getLogger(__name__)
@@ -79,6 +84,9 @@ class ObserveConfig:
     min_tracking_confidence: float = 0.5   # below this the tracker re-detects, [0, 1]
     mask_long_side: int = 256              # px, longer side of the stored mask; 0 = no masks
     max_gap_frames: int = 5                # longest gap filled by interpolation (5 = 0.2 s at 25 Hz)
+    unsure_mask_band: float = 3.0          # mask px at a 256-px mask: a detection whose person
+                                           # mask's unsure band is wider is left out
+                                           # (mask_quality.py); 0 = keep every detection
     min_detection_fraction: float = 0.5    # fail if the person is found in fewer frames than this
     start: float | None = None             # s, first time analysed (None: start of the video)
     end: float | None = None               # s, analysis stops before this (None: end of video)
@@ -104,6 +112,9 @@ class ObserveConfig:
             bad(f"person={self.person} is not an image point", "give x,y in pixels")
         if self.mask_long_side < 0 or self.max_gap_frames < 0:
             bad("mask_long_side and max_gap_frames must be >= 0", "use non-negative integers")
+        if not (math.isfinite(self.unsure_mask_band) and self.unsure_mask_band >= 0):
+            bad(f"unsure_mask_band={self.unsure_mask_band} is not a width",
+                "use a non-negative number of mask pixels (0 keeps every detection)")
 
 
 @dataclass(frozen=True)
@@ -274,6 +285,7 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
         if len(left) < len(jumps) and again.detected.sum() >= cfg.min_detection_fraction \
                 * again.num_frames:
             obs = again
+    obs = _drop_unsure(obs, cfg, video)
     if cfg.stabilize:
         motion = estimate_camera_motion(info, plan, obs)
         obs = stabilize(obs, motion)
@@ -345,6 +357,34 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
         timestamps=plan.timestamps[:read].astype(np.float64), keypoints2d=kp, detected=detected,
         interpolated=interpolated, world_landmarks=world, masks=masks,
         frame_indices=plan.indices[:read].astype(np.int64))
+
+
+def _drop_unsure(obs: Observations, cfg: ObserveConfig, video: Path) -> Observations:
+    """The observations without the detections whose person mask was unsure (torn landmarks,
+    mask_quality.py); the gaps they leave are filled as any other (fill_gaps)."""
+    if obs.masks is None or cfg.unsure_mask_band <= 0:
+        return obs
+    unsure = unsure_frames(obs.masks, obs.detected,
+                           cfg.unsure_mask_band * cfg.mask_long_side / 256)
+    if not unsure.any():
+        return obs
+    detected = obs.detected & ~unsure
+
+    def refill(values: np.ndarray) -> np.ndarray:
+        kept = np.where(detected.reshape((-1,) + (1,) * (values.ndim - 1)), values, 0)
+        return fill_gaps(kept.astype(values.dtype), detected, cfg.max_gap_frames)[0]
+
+    _, interpolated = fill_gaps(obs.keypoints2d, detected, cfg.max_gap_frames)
+    at = ", ".join(f"{t:.2f}" for t in obs.timestamps[unsure][:8])
+    more = f" and {int(unsure.sum()) - 8} more" if unsure.sum() > 8 else ""
+    _log.warning("%s: MediaPipe was unsure where the person is in %d frame%s (at %s s%s: a "
+                 "blurred person mask, e.g. glare or a poor first detection); those detections "
+                 "are left out and treated as gaps", video, int(unsure.sum()),
+                 "s" * int(unsure.sum() > 1), at, more)
+    return obs.replace(
+        keypoints2d=refill(obs.keypoints2d), detected=detected, interpolated=interpolated,
+        world_landmarks=None if obs.world_landmarks is None else refill(obs.world_landmarks),
+        masks=refill(obs.masks))
 
 
 def _follower(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig
