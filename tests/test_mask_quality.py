@@ -66,6 +66,7 @@ def test_an_unsure_detection_becomes_a_gap_filled_from_its_neighbours(caplog):
     with caplog.at_level(logging.WARNING):
         kept = _drop_unsure(obs, ObserveConfig(), "clip.mp4")
     assert kept.detected.tolist() == [1, 1, 1, 0, 1, 1, 1]
+    assert kept.unsure.tolist() == [0, 0, 0, 1, 0, 0, 0]
     assert kept.interpolated.tolist() == [0, 0, 0, 1, 0, 0, 0]
     np.testing.assert_allclose(kept.keypoints2d[3, :, 0], 30.0)   # between 20 and 40
     np.testing.assert_array_equal(kept.masks[3], masks[2])        # both neighbours alike
@@ -84,6 +85,7 @@ def test_the_band_bound_scales_with_the_mask_size_and_zero_turns_it_off():
     masks = np.stack([_disc(30, 0.6)] * 3 + [_disc(30, 5.0)] + [_disc(30, 0.6)] * 3)
     obs = _observations(masks)
     assert _drop_unsure(obs, ObserveConfig(unsure_mask_band=0), "c") is obs
+    assert _drop_unsure(obs.replace(masks=None), ObserveConfig(), "c").unsure is None
     # Read as a 2048-px mask the same band is 8x narrower than the bound asks.
     assert _drop_unsure(obs, ObserveConfig(mask_long_side=2048), "c").detected.all()
 

@@ -24,6 +24,15 @@ def test_save_load_roundtrip(tmp_path):
     np.testing.assert_array_equal(back.keypoints2d, obs.keypoints2d)
     np.testing.assert_array_equal(back.world_landmarks, obs.world_landmarks)
     assert back.image_size == (640, 480) and back.fps == 25.0 and back.masks is None
+    assert back.unsure is None
+
+
+def test_frames_left_out_as_torn_are_saved_and_sliced_with_the_rest(tmp_path):
+    unsure = np.array([1, 0, 0, 1], bool)
+    obs = _obs(detected=~unsure, unsure=unsure)
+    back = Observations.load(obs.save(tmp_path / "o.npz"))
+    assert back.unsure.dtype == bool and back.unsure.tolist() == [1, 0, 0, 1]
+    assert obs.frames(1, 4).unsure.tolist() == [0, 0, 1]
 
 
 def test_nan_keypoints_name_file_and_frame():
@@ -37,6 +46,7 @@ def test_nan_keypoints_name_file_and_frame():
     (dict(fps=0.0), "frame rate"),
     (dict(keypoints2d=np.zeros((4, 17, 3))), "expected"),
     (dict(detected=np.ones(3, bool)), "detected has shape"),
+    (dict(unsure=np.zeros(5, bool)), "unsure has shape"),
 ])
 def test_malformed_fields_are_rejected(change, message):
     with pytest.raises(PhysposeError, match=message):

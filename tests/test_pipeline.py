@@ -17,7 +17,7 @@ from physpose.dynamics.synthetic import simulated_clip
 from physpose.errors import PhysposeError
 from physpose.diagnostics import trimmed_message
 from physpose.pipeline import (CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig, reconstruct,
-                               trim_unseen_ends)
+                               trim_unseen_ends, unsure_times)
 from physpose.reconstruction import Reconstruction
 from physpose.shape import BodyShape
 
@@ -53,6 +53,19 @@ def test_reconstruct_cli_refuses_a_clip_of_one_frame(tmp_path, capsys):
     code = main(["reconstruct", str(keypoints), "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert code == 2 and "only 1 frame" in err and "one.npz" in err and "Traceback" not in err
+
+
+def test_detections_left_out_as_torn_are_timed_on_the_footages_clock():
+    body = build_body(BodyShape.from_height(1.75, 70.0))
+    _, obs, _ = simulated_clip(body, "stand", seconds=0.4)
+    assert unsure_times(obs) == []
+    unsure = np.zeros(obs.num_frames, bool)
+    unsure[[0, 2]] = True
+    torn = obs.replace(unsure=unsure)
+    assert unsure_times(torn) == [0.0, round(2 / obs.fps, 4)]
+    # Footage played 4x slower: the real clock's 0.08 s is 0.32 s into the footage.
+    slow = torn.on_real_clock(4.0)
+    assert unsure_times(slow, 4.0) == unsure_times(torn)
 
 
 def test_frames_before_and_after_the_person_is_in_view_are_left_out():
@@ -94,7 +107,8 @@ def test_reconstruct_writes_the_contract(tmp_path):
     assert loaded.meta["dynamics"]["reference"]["root_residual_median"] < 0.05
     # A clean simulated clip raises none of the input warnings (physpose.diagnostics).
     assert loaded.meta["diagnostics"] == {"trimmed": None, "observed_frames": t,
-                                          "camera_motion": None, "person_jumps": [],
+                                          "camera_motion": None, "unsure_detections": [],
+                                          "person_jumps": [],
                                           "hidden_feet": 0.0, "raised": [],
                                           "supports": [], "seated": [], "seats": [],
                                           "invalid_windows": [], "unrecorded_forces": [],

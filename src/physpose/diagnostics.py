@@ -11,6 +11,8 @@ somersaults off it, and back), and what the dynamics stage makes of them:
   jump lasts: the person stands on something the scene lacks, or the floor was misjudged.
   Without a support the simulated body falls to the floor and every sample of those windows is
   invalid; `physpose.supports` gives the scene a box under the feet there.
+- `unsure_message`: detections the observe stage left out because MediaPipe's person mask
+  was a blurred blob there (physpose.mask_quality): their landmarks were torn.
 - `hidden_feet_share`: how often no foot landmark is seen (the feet are out of the picture or
   hidden). The detector then guesses where the feet are, and the floor the kinematic fit puts
   under them is a guess too.
@@ -217,6 +219,19 @@ def jumps_message(frames: list[int], fps: float) -> str | None:
             "video to that person")
 
 
+def unsure_message(times: list[float]) -> str | None:
+    """A warning on the detections observe left out as torn (`Observations.unsure`), given
+    their times in seconds into the footage, or None."""
+    if not times:
+        return None
+    at = ", ".join(f"{t:.2f}" for t in times[:8]) + (f" and {len(times) - 8} more"
+                                                     if len(times) > 8 else "")
+    return (f"input: MediaPipe was unsure where the person is in {len(times)} frame"
+            f"{'s' * (len(times) > 1)} (at {at} s: a blurred person mask, e.g. glare or a "
+            "first detection off the person); those detections were left out and the frames "
+            "treated as gaps (docs/kinematics.md, Torn detections)")
+
+
 def hidden_feet_message(share: float) -> str | None:
     """A warning on `hidden_feet_share`, or None below HIDDEN_FEET_SHARE."""
     if share < HIDDEN_FEET_SHARE:
@@ -334,6 +349,7 @@ def warning_lines(found: dict, fps: float, slow_motion: float = 1.0) -> list[str
     lines = [rate_message(fps),
              trimmed_message(found.get("trimmed"), found.get("observed_frames", 0), fps),
              camera_message(found.get("camera_motion")),
+             unsure_message(found.get("unsure_detections", [])),
              jumps_message(found.get("person_jumps", []), fps),
              hidden_feet_message(found.get("hidden_feet", 0.0)),
              raised_message([tuple(r) for r in found.get("raised", [])], fps,

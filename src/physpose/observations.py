@@ -46,6 +46,9 @@ class Observations:
     # "turning" or "moving" (turns and moves along: not compensated), None where not measured.
     homographies: np.ndarray | None = None
     camera_motion: str | None = None
+    # (T,) bool: frames whose detection observe left out as torn (a blurred person mask,
+    # physpose.mask_quality); they are gaps now. None where none was left out.
+    unsure: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         validate(self)
@@ -76,7 +79,7 @@ class Observations:
             "interpolated": self.interpolated,
         }
         for key in ("world_landmarks", "masks", "camera_K", "frame_indices", "homographies",
-                    "camera_motion"):
+                    "camera_motion", "unsure"):
             value = getattr(self, key)
             if value is not None:
                 arrays[key] = value
@@ -108,6 +111,7 @@ class Observations:
             frame_indices=d.get("frame_indices"),
             homographies=d.get("homographies"),
             camera_motion=None if "camera_motion" not in d else str(d["camera_motion"]),
+            unsure=None if "unsure" not in d else d["unsure"].astype(bool),
         )
 
     def on_real_clock(self, slow_motion: float) -> "Observations":
@@ -124,7 +128,7 @@ class Observations:
     def frames(self, start: int, stop: int) -> "Observations":
         """The frames [start, stop) alone (every per-frame array sliced)."""
         per_frame = ("timestamps", "keypoints2d", "detected", "interpolated", "world_landmarks",
-                     "masks", "frame_indices", "homographies")
+                     "masks", "frame_indices", "homographies", "unsure")
         return self.replace(**{k: None if getattr(self, k) is None else getattr(self, k)[start:stop]
                                for k in per_frame})
 
@@ -202,5 +206,7 @@ def validate(obs: Observations) -> None:
         fail(f"camera_K has shape {np.asarray(obs.camera_K).shape}, expected (3, 3)")
     if obs.homographies is not None and np.asarray(obs.homographies).shape != (t, 3, 3):
         fail(f"homographies has shape {np.asarray(obs.homographies).shape}, expected ({t}, 3, 3)")
+    if obs.unsure is not None and np.asarray(obs.unsure).shape != (t,):
+        fail(f"unsure has shape {np.asarray(obs.unsure).shape}, expected ({t},)")
     if obs.camera_motion is not None and obs.camera_motion not in CAMERA_MOTIONS:
         fail(f"camera_motion {obs.camera_motion!r} is not one of {', '.join(CAMERA_MOTIONS)}")

@@ -60,7 +60,7 @@ from tqdm import tqdm
 from physpose import video as videolib
 from physpose.cache import Cache, stage_key
 from physpose.camera_motion import estimate_camera_motion, stabilize
-from physpose.diagnostics import image_box_corners, person_jumps
+from physpose.diagnostics import image_box_corners, person_jumps, unsure_message
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
 from physpose.mask_quality import unsure_frames
@@ -68,7 +68,7 @@ from physpose.observations import Observations
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 6  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 7  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 _log = logging.getLogger(__name__)
@@ -375,16 +375,11 @@ def _drop_unsure(obs: Observations, cfg: ObserveConfig, video: Path) -> Observat
         return fill_gaps(kept.astype(values.dtype), detected, cfg.max_gap_frames)[0]
 
     _, interpolated = fill_gaps(obs.keypoints2d, detected, cfg.max_gap_frames)
-    at = ", ".join(f"{t:.2f}" for t in obs.timestamps[unsure][:8])
-    more = f" and {int(unsure.sum()) - 8} more" if unsure.sum() > 8 else ""
-    _log.warning("%s: MediaPipe was unsure where the person is in %d frame%s (at %s s%s: a "
-                 "blurred person mask, e.g. glare or a poor first detection); those detections "
-                 "are left out and treated as gaps", video, int(unsure.sum()),
-                 "s" * int(unsure.sum() > 1), at, more)
+    _log.warning("%s: %s", video, unsure_message(obs.timestamps[unsure].tolist()))
     return obs.replace(
         keypoints2d=refill(obs.keypoints2d), detected=detected, interpolated=interpolated,
         world_landmarks=None if obs.world_landmarks is None else refill(obs.world_landmarks),
-        masks=refill(obs.masks))
+        masks=refill(obs.masks), unsure=unsure)
 
 
 def _follower(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig

@@ -17,6 +17,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from physpose import __version__, diagnostics, supports
 from physpose.body import BodyConfig, build_body
 from physpose.cache import atomic_path
@@ -106,6 +108,14 @@ def trim_unseen_ends(obs: Observations) -> tuple[Observations, list[int] | None]
     return obs.frames(first, last + 1), [first, last]
 
 
+def unsure_times(obs: Observations, slow_motion: float = 1.0) -> list[float]:
+    """Seconds into the footage of the detections observe left out as torn
+    (`Observations.unsure`); obs on the real clock of footage `slow_motion` times slower."""
+    if obs.unsure is None:
+        return []
+    return [round(float(t) * slow_motion, 4) for t in np.asarray(obs.timestamps)[obs.unsure]]
+
+
 def reconstruct(video_or_observations: str | Path | Observations, out_dir: str | Path,
                 config: PipelineConfig = PipelineConfig(), *, height: float | None = None,
                 mass: float | None = None, resume: bool = True, progress: bool = True
@@ -146,6 +156,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     lap("observe")
     _warn(diagnostics.rate_message(obs.fps))
     observed_frames = obs.num_frames
+    unsure = unsure_times(obs, config.slow_motion)
+    _warn(diagnostics.unsure_message(unsure))
     obs, trimmed = trim_unseen_ends(obs)
     _warn(diagnostics.trimmed_message(trimmed, observed_frames, obs.fps))
     _warn(diagnostics.camera_message(obs.camera_motion))
@@ -186,6 +198,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                 physpose_version=__version__,
                 diagnostics={"trimmed": trimmed, "observed_frames": observed_frames,
                              "camera_motion": obs.camera_motion,
+                             "unsure_detections": unsure,
                              "person_jumps": jumps, "hidden_feet": hidden_feet,
                              "raised": [list(r) for r in raised],
                              "supports": [[*b.center, *b.size] for b in boxes],
