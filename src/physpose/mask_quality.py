@@ -38,16 +38,25 @@ def band_width(masks: np.ndarray) -> np.ndarray:
         return np.where(outline > 0, unsure / outline, np.nan)
 
 
-def unsure_frames(masks: np.ndarray, detected: np.ndarray, max_width: float) -> np.ndarray:
-    """(T,) bool: detected frames whose mask's unsure band is wider than max_width mask pixels
-    and more than UNSURE_RATIO times the median over the detected frames."""
+def band_limit(masks: np.ndarray, detected: np.ndarray, max_width: float) -> float:
+    """The widest unsure band a detection of this clip may have: max_width mask pixels, or
+    UNSURE_RATIO times the median over the detected frames where that is more (inf when
+    max_width <= 0 or no detected frame has a mask)."""
     detected = np.asarray(detected, dtype=bool)
-    flagged = np.zeros_like(detected)
     if max_width <= 0 or not detected.any():
-        return flagged
+        return np.inf
     width = band_width(np.asarray(masks)[detected])
     if np.isnan(width).all():
-        return flagged
-    median = np.nanmedian(width)
-    flagged[detected] = np.nan_to_num(width, nan=0.0) > max(max_width, UNSURE_RATIO * median)
+        return np.inf
+    return max(max_width, UNSURE_RATIO * float(np.nanmedian(width)))
+
+
+def unsure_frames(masks: np.ndarray, detected: np.ndarray, max_width: float) -> np.ndarray:
+    """(T,) bool: detected frames whose mask's unsure band is wider than `band_limit`."""
+    detected = np.asarray(detected, dtype=bool)
+    flagged = np.zeros_like(detected)
+    limit = band_limit(masks, detected, max_width)
+    if np.isfinite(limit):
+        width = band_width(np.asarray(masks)[detected])
+        flagged[detected] = np.nan_to_num(width, nan=0.0) > limit
     return flagged

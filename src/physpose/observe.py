@@ -37,7 +37,9 @@ maps back to each frame's pixels. A camera that also travels is only reported
 
 A detection whose person mask is a blurred blob rather than a person's outline (the landmark
 model was handed a poor region: glare, a first detection off the person) has torn landmarks;
-it is left out (`unsure_mask_band`, mask_quality.py) before the gaps are filled.
+it is left out (`unsure_mask_band`, mask_quality.py) before the gaps are filled. Where the
+first sure detection comes after the clip's first frame, the frames before it are detected
+again by a pass running backwards from just after it (`_recover_head`).
 
 Frames without a detection are flagged; gaps of at most `max_gap_frames` between two detected
 frames are filled by linear interpolation (positions, confidences, world landmarks and masks)
@@ -60,17 +62,21 @@ from tqdm import tqdm
 from physpose import video as videolib
 from physpose.cache import Cache, stage_key
 from physpose.camera_motion import estimate_camera_motion, stabilize
-from physpose.diagnostics import image_box_corners, person_jumps, unsure_message
+from physpose.diagnostics import (image_box_corners, image_boxes, person_jumps,
+                                  unsure_message)
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
-from physpose.mask_quality import unsure_frames
+from physpose.mask_quality import band_limit, band_width, unsure_frames
 from physpose.observations import Observations
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 7  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 8  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
+HEAD_WARMUP = 3            # frames past the first sure detection the backward pass starts at
+MAX_HEAD_SECONDS = 2.0     # the longest unseen clip head searched backwards
+MAX_HEAD_LONG_SIDE = 1920  # px: larger head frames are shrunk while held for the backward pass
 _log = logging.getLogger(__name__)
 
 
@@ -259,7 +265,7 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
     if cfg.use_cache and (hit := cache.get(key)) is not None:
         return _from_arrays(hit, source=str(video))
     obs = _detect_all(info, plan, cfg, progress, check=False, timing_check=True)
-    zoomed, seed = False, None
+    zoomed, seed, masked_to = False, None, None
     if cfg.person is None and obs.detected.sum() < cfg.min_detection_fraction * obs.num_frames:
         # Perhaps the person is too small for the detector's view of the whole frame: look
         # for them in tiles of a few frames, then follow them in a crop.
@@ -284,8 +290,12 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
         left = person_jumps(again.keypoints2d, again.detected, again.fps)
         if len(left) < len(jumps) and again.detected.sum() >= cfg.min_detection_fraction \
                 * again.num_frames:
-            obs = again
-    obs = _drop_unsure(obs, cfg, video)
+            obs, masked_to = again, regions
+    obs = _drop_unsure(obs, cfg)
+    if not zoomed and cfg.person is None:
+        obs = _recover_head(info, plan, cfg, obs, video, masked_to)
+    if obs.unsure is not None:
+        _log.warning("%s: %s", video, unsure_message(obs.timestamps[obs.unsure].tolist()))
     if cfg.stabilize:
         motion = estimate_camera_motion(info, plan, obs)
         obs = stabilize(obs, motion)
@@ -359,7 +369,7 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
         frame_indices=plan.indices[:read].astype(np.int64))
 
 
-def _drop_unsure(obs: Observations, cfg: ObserveConfig, video: Path) -> Observations:
+def _drop_unsure(obs: Observations, cfg: ObserveConfig) -> Observations:
     """The observations without the detections whose person mask was unsure (torn landmarks,
     mask_quality.py); the gaps they leave are filled as any other (fill_gaps)."""
     if obs.masks is None or cfg.unsure_mask_band <= 0:
@@ -375,11 +385,91 @@ def _drop_unsure(obs: Observations, cfg: ObserveConfig, video: Path) -> Observat
         return fill_gaps(kept.astype(values.dtype), detected, cfg.max_gap_frames)[0]
 
     _, interpolated = fill_gaps(obs.keypoints2d, detected, cfg.max_gap_frames)
-    _log.warning("%s: %s", video, unsure_message(obs.timestamps[unsure].tolist()))
     return obs.replace(
         keypoints2d=refill(obs.keypoints2d), detected=detected, interpolated=interpolated,
         world_landmarks=None if obs.world_landmarks is None else refill(obs.world_landmarks),
         masks=refill(obs.masks), unsure=unsure)
+
+
+def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig,
+                  obs: Observations, video: Path, regions: np.ndarray | None = None
+                  ) -> Observations:
+    """The clip's head before the first sure detection (where MediaPipe's detector missed the
+    person, or its detections were left out as torn), detected again by a pass that runs
+    backwards from just after it: the tracker, started on the person, often keeps them where
+    the detector alone could not find them (Sports2D's demo: frames 0-7, against a sun flare).
+    Backward detections are kept from the first sure frame down while each is found and its
+    mask is sure (mask_quality.band_limit), and only if the backward pass found the same
+    person at the first sure frame. regions: the image boxes the forward pass was masked to."""
+    first = int(np.argmax(obs.detected)) if obs.detected.any() else 0
+    if first == 0 or first > MAX_HEAD_SECONDS * obs.fps:
+        return obs
+    found = _detect_backwards(info, plan, cfg, min(first + HEAD_WARMUP, obs.num_frames - 1),
+                              regions)
+    if len(found) <= first or found[first] is None:
+        return obs
+    centres, diagonals, ok = image_boxes(np.stack([obs.keypoints2d[first],
+                                                   found[first].keypoints2d]))
+    if not ok.all() or np.linalg.norm(centres[0] - centres[1]) > 0.5 * diagonals[0]:
+        return obs   # the backward pass followed someone else
+    limit = np.inf if obs.masks is None else band_limit(
+        obs.masks, obs.detected, cfg.unsure_mask_band * cfg.mask_long_side / 256)
+    kept = []
+    for i in range(first - 1, -1, -1):
+        f = found[i]
+        if f is None or (obs.masks is not None and f.mask is not None
+                         and not band_width(f.mask[None])[0] <= limit):
+            break
+        kept.append(i)
+    if not kept:
+        return obs
+    kp, world = obs.keypoints2d.copy(), None if obs.world_landmarks is None \
+        else obs.world_landmarks.copy()
+    masks = None if obs.masks is None else obs.masks.copy()
+    detected, unsure = obs.detected.copy(), None if obs.unsure is None else obs.unsure.copy()
+    for i in kept:
+        f = found[i]
+        kp[i] = f.keypoints2d
+        if world is not None:
+            world[i] = f.world_landmarks
+        if masks is not None:
+            masks[i] = 0 if f.mask is None else cv2.resize(
+                f.mask, masks.shape[:0:-1], interpolation=cv2.INTER_AREA)
+        detected[i] = True
+        if unsure is not None:
+            unsure[i] = False
+    _log.warning("%s: the person was found at %.2f-%.2f s by following them backwards in time "
+                 "from %.2f s (the detector had missed them there, or torn them)", video,
+                 obs.timestamps[min(kept)], obs.timestamps[first - 1], obs.timestamps[first])
+    return obs.replace(keypoints2d=kp, world_landmarks=world, masks=masks, detected=detected,
+                       unsure=None if unsure is None or not unsure.any() else unsure)
+
+
+def _detect_backwards(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig,
+                      last: int, regions: np.ndarray | None = None
+                      ) -> list[FrameDetection | None]:
+    """MediaPipe on the planned frames last, last - 1, ..., 0 (one tracking pass), each
+    masked to its region where given; the detections in frame order, landmarks in the whole
+    frame's pixels. The frames are held in memory, shrunk to MAX_HEAD_LONG_SIDE."""
+    width, height = info.image_size
+    scale = min(1.0, MAX_HEAD_LONG_SIDE / max(width, height))
+    frames = []
+    for i, (_, image) in enumerate(videolib.read_frames(info, plan.indices[:last + 1])):
+        if regions is not None:
+            image = mask_outside(image, regions[i])
+        frames.append(image if scale == 1.0 else cv2.resize(
+            image, (round(width * scale), round(height * scale)), interpolation=cv2.INTER_AREA))
+    found: list[FrameDetection | None] = [None] * len(frames)
+    with PoseDetector(cfg) as detector:
+        for i in range(len(frames) - 1, -1, -1):
+            found[i] = detector.detect(frames.pop())
+    if scale < 1.0:
+        for i, f in enumerate(found):
+            if f is not None:
+                kp = f.keypoints2d.copy()
+                kp[:, :2] /= scale
+                found[i] = dataclasses.replace(f, keypoints2d=kp)
+    return found
 
 
 def _follower(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig
