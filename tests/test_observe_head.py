@@ -99,12 +99,14 @@ def test_the_unseen_head_is_found_by_tracking_the_person_backwards(scripted):
     assert len(seen) == FIRST + 4   # from 3 frames past the first sure one down to frame 0
 
 
-def test_the_backward_pass_is_kept_only_down_to_its_first_miss_or_unsure_mask(scripted):
+def test_the_backward_pass_is_kept_down_to_its_first_miss_jump_or_unsure_mask(scripted):
     script, _ = scripted
     script.update({i: _found(300 + 5 * i) for i in range(T)})
     script[1] = None
     assert _run(_forward()).seen_span() == (2, T - 1)
     script[3] = _found(315, blur=6.0)            # a blurred blob: torn
+    assert _run(_forward()).seen_span() == (FIRST - 1, T - 1)
+    script[3] = _found(600)                      # someone else, where the person left the view
     assert _run(_forward()).seen_span() == (FIRST - 1, T - 1)
 
 

@@ -71,7 +71,7 @@ from physpose.observations import Observations
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 8  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 9  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 HEAD_WARMUP = 3            # frames past the first sure detection the backward pass starts at
@@ -398,9 +398,10 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
     person, or its detections were left out as torn), detected again by a pass that runs
     backwards from just after it: the tracker, started on the person, often keeps them where
     the detector alone could not find them (Sports2D's demo: frames 0-7, against a sun flare).
-    Backward detections are kept from the first sure frame down while each is found and its
-    mask is sure (mask_quality.band_limit), and only if the backward pass found the same
-    person at the first sure frame. regions: the image boxes the forward pass was masked to."""
+    Backward detections are kept from the first sure frame down while each is found, is the
+    person of the frame after it and has a sure mask (mask_quality.band_limit), and only if
+    the backward pass found the forward pass's person at the first sure frame. regions: the
+    image boxes the forward pass was masked to."""
     first = int(np.argmax(obs.detected)) if obs.detected.any() else 0
     if first == 0 or first > MAX_HEAD_SECONDS * obs.fps:
         return obs
@@ -408,18 +409,17 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
                               regions)
     if len(found) <= first or found[first] is None:
         return obs
-    centres, diagonals, ok = image_boxes(np.stack([obs.keypoints2d[first],
-                                                   found[first].keypoints2d]))
-    if not ok.all() or np.linalg.norm(centres[0] - centres[1]) > 0.5 * diagonals[0]:
+    if not _same_person(obs.keypoints2d[first], found[first].keypoints2d):
         return obs   # the backward pass followed someone else
     limit = np.inf if obs.masks is None else band_limit(
         obs.masks, obs.detected, cfg.unsure_mask_band * cfg.mask_long_side / 256)
     kept = []
     for i in range(first - 1, -1, -1):
         f = found[i]
-        if f is None or (obs.masks is not None and f.mask is not None
-                         and not band_width(f.mask[None])[0] <= limit):
-            break
+        if f is None or not _same_person(found[i + 1].keypoints2d, f.keypoints2d) or (
+                obs.masks is not None and f.mask is not None
+                and not band_width(f.mask[None])[0] <= limit):
+            break   # lost, jumped to someone else, or torn
         kept.append(i)
     if not kept:
         return obs
@@ -443,6 +443,13 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
                  obs.timestamps[min(kept)], obs.timestamps[first - 1], obs.timestamps[first])
     return obs.replace(keypoints2d=kp, world_landmarks=world, masks=masks, detected=detected,
                        unsure=None if unsure is None or not unsure.any() else unsure)
+
+
+def _same_person(a: np.ndarray, b: np.ndarray) -> bool:
+    """Whether two detections' (33, 3) landmarks are one person in consecutive looks: the
+    boxes of their confident landmarks have centres within half of the first box's diagonal."""
+    centres, diagonals, ok = image_boxes(np.stack([a, b]))
+    return bool(ok.all() and np.linalg.norm(centres[0] - centres[1]) <= 0.5 * diagonals[0])
 
 
 def _detect_backwards(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig,
