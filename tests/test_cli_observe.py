@@ -13,6 +13,7 @@ import pytest
 from synthetic_video import make_noise_video
 
 from physpose.cli import main
+from physpose.cli.observe import ObserveRun
 from physpose.keypoints_io import load_keypoints, save_keypoints
 from physpose.observations import Observations
 
@@ -49,6 +50,15 @@ def test_keypoints_input_writes_all_outputs(tmp_path, capsys):
     assert ok and frame.shape[:2] == (160, 200)
     assert frame[:, 95:140].max() > 150  # the landmarks were drawn on the dark background
     assert "person found in 4/4 (100.0%)" in capsys.readouterr().out
+
+
+def test_the_summary_counts_detections_left_out_as_torn(tmp_path):
+    obs = load_keypoints(_keypoints(tmp_path))
+    assert "torn" not in ObserveRun(obs, (), 1.0).summary()
+    torn = obs.replace(detected=np.array([0, 1, 1, 1], bool),
+                       unsure=np.array([1, 0, 0, 0], bool))
+    assert "person found in 3/4 (75.0%), 0 interpolated, 1 left out as torn, 1.0 s" in \
+        ObserveRun(torn, (), 1.0).summary()
 
 
 def test_missing_input_exits_2_with_message(tmp_path, capsys):

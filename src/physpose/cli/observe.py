@@ -35,8 +35,10 @@ class ObserveRun:
     def summary(self) -> str:
         obs = self.observations
         n, found, filled = obs.num_frames, int(obs.detected.sum()), int(obs.interpolated.sum())
+        torn = 0 if obs.unsure is None else int(obs.unsure.sum())
         return (f"{Path(obs.source).name}: {n} frames at {obs.fps:g} fps, person found in "
                 f"{found}/{n} ({100 * found / n:.1f}%), {filled} interpolated, "
+                + (f"{torn} left out as torn, " if torn else "") +
                 f"{self.seconds:.1f} s{_camera_note(obs.camera_motion)}\n"
                 + "".join(f"  wrote {p}\n" for p in self.files))
 
