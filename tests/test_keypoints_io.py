@@ -55,10 +55,12 @@ def test_save_then_load_round_trips(tmp_path, ext):
     turned[:, 0, 2] = np.arange(T)    # where a turning camera's observe stage left them
     original = original.replace(interpolated=np.array([0, 0, 1, 0, 0, 0], bool),
                                 frame_indices=np.arange(T) * 2, homographies=turned,
-                                camera_motion="turning")
+                                camera_motion="turning",
+                                unsure=np.array([1, 0, 0, 0, 0, 0], bool))
     back = load_keypoints(save_keypoints(original, tmp_path / f"copy{ext}"))
+    assert back.unsure.dtype == bool
     for key in ("keypoints2d", "world_landmarks", "camera_K", "timestamps", "detected",
-                "interpolated", "frame_indices", "homographies"):
+                "interpolated", "frame_indices", "homographies", "unsure"):
         np.testing.assert_allclose(getattr(back, key), getattr(original, key), err_msg=key)
     assert back.fps == original.fps and back.image_size == original.image_size
     assert back.camera_motion == "turning"
@@ -66,9 +68,9 @@ def test_save_then_load_round_trips(tmp_path, ext):
 
 def test_observations_npz_is_a_keypoints_file(tmp_path):
     obs = load_keypoints(_write_json(tmp_path, _doc()))
-    obs = obs.replace(masks=np.zeros((T, 4, 3), np.uint8))
+    obs = obs.replace(masks=np.zeros((T, 4, 3), np.uint8), unsure=np.zeros(T, bool))
     back = load_keypoints(obs.save(tmp_path / "observations.npz"))
-    assert back.masks.shape == (T, 4, 3)
+    assert back.masks.shape == (T, 4, 3) and back.unsure.shape == (T,)
     np.testing.assert_array_equal(back.keypoints2d, obs.keypoints2d)
 
 

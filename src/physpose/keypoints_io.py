@@ -24,7 +24,7 @@ _DOC = "see docs/keypoints_format.md"
 _REQUIRED = ("fps", "image_size", "keypoints2d")
 _OPTIONAL = ("world_landmarks", "camera_K", "timestamps", "detected", "interpolated",
              "frame_indices", "masks", "source", "landmark_names", "format_version", "format",
-             "homographies", "camera_motion")
+             "homographies", "camera_motion", "unsure")
 
 
 def is_keypoints_file(path: str | Path) -> bool:
@@ -63,7 +63,7 @@ def save_keypoints(obs: Observations, path: str | Path) -> Path:
         "image_size": [int(v) for v in obs.image_size],
     }
     for key in ("timestamps", "keypoints2d", "detected", "interpolated", "world_landmarks",
-                "camera_K", "frame_indices", "homographies"):
+                "camera_K", "frame_indices", "homographies", "unsure"):
         value = getattr(obs, key)
         if value is not None:
             doc[key] = np.asarray(value).tolist()
@@ -137,7 +137,8 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
 
     per_frame: dict[str, np.ndarray | None] = {}
     for key, shape in (("world_landmarks", (t, NUM_LANDMARKS, 3)), ("timestamps", (t,)),
-                       ("detected", (t,)), ("interpolated", (t,)), ("frame_indices", (t,))):
+                       ("detected", (t,)), ("interpolated", (t,)), ("frame_indices", (t,)),
+                       ("unsure", (t,))):
         value = None if raw.get(key) is None else _array(raw[key], key, fail)
         if value is not None:
             if value.shape != shape:
@@ -181,7 +182,8 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
         camera_K=camera_k,
         frame_indices=None if per_frame["frame_indices"] is None
         else per_frame["frame_indices"].astype(np.int64),
-        homographies=homographies, camera_motion=motion)
+        homographies=homographies, camera_motion=motion,
+        unsure=None if per_frame["unsure"] is None else per_frame["unsure"].astype(bool))
 
 
 def _number(value: Any) -> float | None:
