@@ -195,7 +195,8 @@ def test_analysis_rates_above_the_measured_ones_are_warned_about():
 def test_detections_left_out_as_torn_are_warned_about_with_their_times():
     assert diagnostics.unsure_message([]) is None
     line = diagnostics.unsure_message([0.13, 0.23, 0.27])
-    assert "3 frames" in line and "0.13, 0.23, 0.27 s" in line and "Torn detections" in line
+    assert "3 frames" in line and "0.13, 0.23, 0.27 s into the video" in line
+    assert "Torn detections" in line
     many = diagnostics.unsure_message([0.1 * k for k in range(11)])
     assert "and 3 more" in many and "1.00" not in many
     assert diagnostics.warning_lines({"unsure_detections": [0.13]}, 25.0) == [

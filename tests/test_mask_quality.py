@@ -8,7 +8,7 @@ import pytest
 
 from physpose.mask_quality import band_width, unsure_frames
 from physpose.observations import Observations
-from physpose.observe import ObserveConfig, _drop_unsure
+from physpose.observe import ObserveConfig, _band_bound, _drop_unsure
 
 
 def _disc(radius: float, blur: float = 0.0, size: int = 128) -> np.ndarray:
@@ -77,13 +77,23 @@ def test_unsure_detections_at_the_start_are_left_unseen_not_filled():
     assert np.all(kept.keypoints2d[:2] == 0) and np.all(kept.masks[:2] == 0)
 
 
-def test_the_band_bound_scales_with_the_mask_size_and_zero_turns_it_off():
+def test_the_band_bound_scales_with_the_masks_own_size_and_zero_turns_it_off():
+    assert _band_bound(np.zeros((1, 144, 256), np.uint8), ObserveConfig()) == 3.0
+    # A small video's masks are smaller than mask_long_side asks: the bound follows them.
+    assert _band_bound(np.zeros((1, 64, 36), np.uint8), ObserveConfig()) == 0.75
+    assert _band_bound(np.zeros((1, 512, 288), np.uint8), ObserveConfig()) == 6.0
     masks = np.stack([_disc(30, 0.6)] * 3 + [_disc(30, 5.0)] + [_disc(30, 0.6)] * 3)
     obs = _observations(masks)
     assert _drop_unsure(obs, ObserveConfig(unsure_mask_band=0)) is obs
     assert _drop_unsure(obs.replace(masks=None), ObserveConfig()).unsure is None
-    # Read as a 2048-px mask the same band is 8x narrower than the bound asks.
-    assert _drop_unsure(obs, ObserveConfig(mask_long_side=2048)).detected.all()
+
+
+def test_a_faint_blob_with_nothing_sure_in_it_is_unsure_and_an_empty_mask_is_no_mask():
+    faint = np.round(0.45 * _disc(30, 5.0)).astype(np.uint8)      # peaks under 0.5
+    widths = band_width(np.stack([faint, np.zeros_like(faint)]))
+    assert widths[0] == np.inf and np.isnan(widths[1])
+    masks = np.stack([_disc(30, 0.6)] * 5 + [faint])
+    assert unsure_frames(masks, np.ones(6, bool), 3.0).tolist() == [0, 0, 0, 0, 0, 1]
 
 
 @pytest.mark.parametrize("band", [-1.0, float("nan")])

@@ -47,6 +47,7 @@ def test_nan_keypoints_name_file_and_frame():
     (dict(keypoints2d=np.zeros((4, 17, 3))), "expected"),
     (dict(detected=np.ones(3, bool)), "detected has shape"),
     (dict(unsure=np.zeros(5, bool)), "unsure has shape"),
+    (dict(unsure=np.array([0, 2, 0, 0])), "expected \\(4,\\) bool"),
 ])
 def test_malformed_fields_are_rejected(change, message):
     with pytest.raises(PhysposeError, match=message):

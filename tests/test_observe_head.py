@@ -86,6 +86,12 @@ def _found(x: float, blur: float = 0.6, scale: float = 1.0) -> FrameDetection:
     return FrameDetection(kp, np.ones((33, 3)), _disc_mask(blur))
 
 
+def unsure_at(*frames) -> list[bool]:
+    flags = np.zeros(T, bool)
+    flags[list(frames)] = True
+    return flags.tolist()
+
+
 def test_the_unseen_head_is_found_by_tracking_the_person_backwards(scripted):
     script, seen = scripted
     script.update({i: _found(300 + 5 * i) for i in range(T)})
@@ -136,3 +142,51 @@ def test_nothing_is_searched_when_the_person_is_seen_from_the_start_or_long_afte
     late = obs.replace(fps=2.0)                  # frame 5 is 2.5 s in: longer than 2 s
     assert _run(late) is late
     assert seen == []
+
+
+def test_frames_left_out_as_torn_and_found_again_are_no_longer_unsure(scripted):
+    script, _ = scripted
+    script.update({i: _found(300 + 5 * i) for i in range(T)})
+    unsure = np.zeros(T, bool)
+    unsure[[2, 4]] = True                        # torn, left out by _drop_unsure
+    obs = _forward().replace(unsure=unsure)
+    assert _run(obs).unsure is None              # every one found again
+    script[3] = None                             # the pass loses the person at frame 3
+    left = _run(obs)
+    assert left.seen_span() == (4, T - 1) and left.unsure.tolist() == unsure_at(2)
+
+
+def test_a_barely_visible_backward_detection_ends_the_search(scripted):
+    script, _ = scripted
+    script.update({i: _found(300 + 5 * i) for i in range(T)})
+    script[2].keypoints2d[:, 2] = 0.3            # mostly out of the picture
+    assert _run(_forward()).seen_span() == (3, T - 1)
+
+
+def test_backward_masks_are_brought_to_the_observations_mask_size(scripted):
+    script, _ = scripted
+    small = cv2.resize(_disc_mask(0.6), (128, 72), interpolation=cv2.INTER_AREA)
+    script.update({i: FrameDetection(_keypoints(300 + 5 * i), np.ones((33, 3)), small)
+                   for i in range(T)})
+    back = _run(_forward())
+    assert back.masks.shape == (T, 144, 256) and back.masks[0].max() > 200
+
+
+def test_the_backward_pass_sees_only_the_region_the_forward_pass_was_masked_to(scripted,
+                                                                            monkeypatch):
+    script, _ = scripted
+    script.update({i: _found(300 + 5 * i) for i in range(T)})
+    masked = []
+
+    def mask_outside(image, region):
+        masked.append(tuple(region))
+        return image
+
+    monkeypatch.setattr(observe_mod, "mask_outside", mask_outside)
+    regions = np.tile([10.0, 20.0, 600.0, 340.0], (T, 1))
+    regions[:, 0] += np.arange(T)
+    info = videolib.VideoInfo(Path("clip.mp4"), 25.0, T, 640, 360)
+    plan = videolib.FramePlan(25.0, np.arange(T), np.arange(T) / 25.0)
+    back = _recover_head(info, plan, ObserveConfig(), _forward(), Path("clip.mp4"), regions)
+    assert back.detected.all()
+    assert [r[0] for r in masked] == [10.0 + i for i in range(FIRST + 4)]

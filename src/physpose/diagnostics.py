@@ -227,9 +227,9 @@ def unsure_message(times: list[float]) -> str | None:
     at = ", ".join(f"{t:.2f}" for t in times[:8]) + (f" and {len(times) - 8} more"
                                                      if len(times) > 8 else "")
     return (f"input: MediaPipe was unsure where the person is in {len(times)} frame"
-            f"{'s' * (len(times) > 1)} (at {at} s: a blurred person mask, e.g. glare or a "
-            "first detection off the person); those detections were left out and the frames "
-            "treated as gaps (docs/kinematics.md, Torn detections)")
+            f"{'s' * (len(times) > 1)} (at {at} s into the video: a blurred person mask, "
+            "e.g. glare or a first detection off the person); those detections were left out "
+            "and the frames treated as gaps (docs/kinematics.md, Torn detections)")
 
 
 def hidden_feet_message(share: float) -> str | None:

@@ -23,40 +23,43 @@ from scipy.ndimage import binary_erosion
 
 UNSURE_LOW, UNSURE_HIGH = 0.15, 0.85   # mask probabilities counted as unsure
 UNSURE_RATIO = 2.0                      # a flagged frame's band is at least this x the median
+# The same on the masks' uint8 scale (probability x 255, rounded).
+_LOW, _HIGH, _HALF = int(UNSURE_LOW * 255), int(np.ceil(UNSURE_HIGH * 255)), 127
 
 
 def band_width(masks: np.ndarray) -> np.ndarray:
     """(T,) width in mask pixels of each mask's unsure band: pixels with probability between
-    UNSURE_LOW and UNSURE_HIGH per outline pixel of the region above 0.5; NaN where that region
-    is empty. masks: (T, h, w) uint8 probability x 255."""
-    masks = np.asarray(masks)
-    prob = masks.astype(np.float32) / 255.0
-    inside = prob > 0.5
-    outline = np.array([(m & ~binary_erosion(m)).sum() for m in inside], dtype=float)
-    unsure = ((prob > UNSURE_LOW) & (prob < UNSURE_HIGH)).sum(axis=(1, 2))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(outline > 0, unsure / outline, np.nan)
+    UNSURE_LOW and UNSURE_HIGH per outline pixel of the region above 0.5. NaN for an empty
+    mask (no person in it), inf for a faint blob with no pixel above 0.5. masks: (T, h, w)
+    uint8 probability x 255, read one frame at a time."""
+    widths = np.full(len(masks), np.nan)
+    for i, m in enumerate(masks):
+        inside = m > _HALF
+        outline = int((inside & ~binary_erosion(inside)).sum())
+        unsure = int(((m > _LOW) & (m < _HIGH)).sum())
+        if outline:
+            widths[i] = unsure / outline
+        elif unsure:
+            widths[i] = np.inf
+    return widths
 
 
-def band_limit(masks: np.ndarray, detected: np.ndarray, max_width: float) -> float:
-    """The widest unsure band a detection of this clip may have: max_width mask pixels, or
-    UNSURE_RATIO times the median over the detected frames where that is more (inf when
-    max_width <= 0 or no detected frame has a mask)."""
-    detected = np.asarray(detected, dtype=bool)
-    if max_width <= 0 or not detected.any():
+def band_limit(widths: np.ndarray, max_width: float) -> float:
+    """The widest unsure band a detection of a clip may have, given `band_width` of its
+    detected frames: max_width mask pixels, or UNSURE_RATIO times their median where that is
+    more; inf when max_width <= 0 or no frame has a mask."""
+    widths = np.asarray(widths, dtype=float)
+    if max_width <= 0 or np.isnan(widths).all():
         return np.inf
-    width = band_width(np.asarray(masks)[detected])
-    if np.isnan(width).all():
-        return np.inf
-    return max(max_width, UNSURE_RATIO * float(np.nanmedian(width)))
+    return max(max_width, UNSURE_RATIO * float(np.nanmedian(widths)))
 
 
 def unsure_frames(masks: np.ndarray, detected: np.ndarray, max_width: float) -> np.ndarray:
     """(T,) bool: detected frames whose mask's unsure band is wider than `band_limit`."""
     detected = np.asarray(detected, dtype=bool)
     flagged = np.zeros_like(detected)
-    limit = band_limit(masks, detected, max_width)
-    if np.isfinite(limit):
-        width = band_width(np.asarray(masks)[detected])
-        flagged[detected] = np.nan_to_num(width, nan=0.0) > limit
+    if max_width <= 0 or not detected.any():
+        return flagged
+    widths = band_width(np.asarray(masks)[detected])
+    flagged[detected] = np.nan_to_num(widths, nan=0.0) > band_limit(widths, max_width)
     return flagged

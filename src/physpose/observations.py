@@ -206,7 +206,9 @@ def validate(obs: Observations) -> None:
         fail(f"camera_K has shape {np.asarray(obs.camera_K).shape}, expected (3, 3)")
     if obs.homographies is not None and np.asarray(obs.homographies).shape != (t, 3, 3):
         fail(f"homographies has shape {np.asarray(obs.homographies).shape}, expected ({t}, 3, 3)")
-    if obs.unsure is not None and np.asarray(obs.unsure).shape != (t,):
-        fail(f"unsure has shape {np.asarray(obs.unsure).shape}, expected ({t},)")
+    if obs.unsure is not None and (np.asarray(obs.unsure).shape != (t,)
+                                   or np.asarray(obs.unsure).dtype != bool):
+        fail(f"unsure has shape {np.asarray(obs.unsure).shape} and type "
+             f"{np.asarray(obs.unsure).dtype}, expected ({t},) bool")
     if obs.camera_motion is not None and obs.camera_motion not in CAMERA_MOTIONS:
         fail(f"camera_motion {obs.camera_motion!r} is not one of {', '.join(CAMERA_MOTIONS)}")

@@ -62,8 +62,7 @@ from tqdm import tqdm
 from physpose import video as videolib
 from physpose.cache import Cache, stage_key
 from physpose.camera_motion import estimate_camera_motion, stabilize
-from physpose.diagnostics import (image_box_corners, image_boxes, person_jumps,
-                                  unsure_message)
+from physpose.diagnostics import image_box_corners, image_boxes, person_jumps
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
 from physpose.mask_quality import band_limit, band_width, unsure_frames
@@ -71,7 +70,7 @@ from physpose.observations import Observations
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 9  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 10  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 HEAD_WARMUP = 3            # frames past the first sure detection the backward pass starts at
@@ -93,6 +92,7 @@ class ObserveConfig:
     unsure_mask_band: float = 3.0          # mask px at a 256-px mask: a detection whose person
                                            # mask's unsure band is wider is left out
                                            # (mask_quality.py); 0 = keep every detection
+    follow_back: bool = True               # search an unseen clip head by a backward pass
     min_detection_fraction: float = 0.5    # fail if the person is found in fewer frames than this
     start: float | None = None             # s, first time analysed (None: start of the video)
     end: float | None = None               # s, analysis stops before this (None: end of video)
@@ -292,10 +292,10 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
                 * again.num_frames:
             obs, masked_to = again, regions
     obs = _drop_unsure(obs, cfg)
-    if not zoomed and cfg.person is None:
+    if cfg.follow_back and not zoomed and cfg.person is None:
         obs = _recover_head(info, plan, cfg, obs, video, masked_to)
     if obs.unsure is not None:
-        _log.warning("%s: %s", video, unsure_message(obs.timestamps[obs.unsure].tolist()))
+        _check_detection_rate(info.path, int(obs.detected.sum()), obs.num_frames, cfg)
     if cfg.stabilize:
         motion = estimate_camera_motion(info, plan, obs)
         obs = stabilize(obs, motion)
@@ -374,8 +374,7 @@ def _drop_unsure(obs: Observations, cfg: ObserveConfig) -> Observations:
     mask_quality.py); the gaps they leave are filled as any other (fill_gaps)."""
     if obs.masks is None or cfg.unsure_mask_band <= 0:
         return obs
-    unsure = unsure_frames(obs.masks, obs.detected,
-                           cfg.unsure_mask_band * cfg.mask_long_side / 256)
+    unsure = unsure_frames(obs.masks, obs.detected, _band_bound(obs.masks, cfg))
     if not unsure.any():
         return obs
     detected = obs.detected & ~unsure
@@ -399,9 +398,10 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
     backwards from just after it: the tracker, started on the person, often keeps them where
     the detector alone could not find them (Sports2D's demo: frames 0-7, against a sun flare).
     Backward detections are kept from the first sure frame down while each is found, is the
-    person of the frame after it and has a sure mask (mask_quality.band_limit), and only if
-    the backward pass found the forward pass's person at the first sure frame. regions: the
-    image boxes the forward pass was masked to."""
+    person of the frame after it, is in view (mean visibility MIN_SEED_VISIBILITY) and has a
+    sure mask (mask_quality.band_limit), and only if the backward pass found the forward
+    pass's person at the first sure frame. regions: the image boxes the forward pass was
+    masked to."""
     first = int(np.argmax(obs.detected)) if obs.detected.any() else 0
     if first == 0 or first > MAX_HEAD_SECONDS * obs.fps:
         return obs
@@ -412,14 +412,15 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
     if not _same_person(obs.keypoints2d[first], found[first].keypoints2d):
         return obs   # the backward pass followed someone else
     limit = np.inf if obs.masks is None else band_limit(
-        obs.masks, obs.detected, cfg.unsure_mask_band * cfg.mask_long_side / 256)
+        band_width(obs.masks[obs.detected]), _band_bound(obs.masks, cfg))
     kept = []
     for i in range(first - 1, -1, -1):
         f = found[i]
-        if f is None or not _same_person(found[i + 1].keypoints2d, f.keypoints2d) or (
-                obs.masks is not None and f.mask is not None
-                and not band_width(f.mask[None])[0] <= limit):
-            break   # lost, jumped to someone else, or torn
+        if f is None or not _same_person(found[i + 1].keypoints2d, f.keypoints2d) \
+                or f.keypoints2d[:, 2].mean() < MIN_SEED_VISIBILITY or (
+                    obs.masks is not None and f.mask is not None
+                    and not band_width(f.mask[None])[0] <= limit):
+            break   # lost, jumped to someone else, barely in view, or torn
         kept.append(i)
     if not kept:
         return obs
@@ -443,6 +444,11 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
                  obs.timestamps[min(kept)], obs.timestamps[first - 1], obs.timestamps[first])
     return obs.replace(keypoints2d=kp, world_landmarks=world, masks=masks, detected=detected,
                        unsure=None if unsure is None or not unsure.any() else unsure)
+
+
+def _band_bound(masks: np.ndarray, cfg: ObserveConfig) -> float:
+    """cfg.unsure_mask_band (mask pixels at a 256-pixel mask) at these masks' size."""
+    return cfg.unsure_mask_band * max(np.asarray(masks).shape[1:]) / 256
 
 
 def _same_person(a: np.ndarray, b: np.ndarray) -> bool:
