@@ -70,12 +70,14 @@ from physpose.observations import Observations
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 10  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 11  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 HEAD_WARMUP = 3            # frames past the first sure detection the backward pass starts at
 MAX_HEAD_SECONDS = 2.0     # the longest unseen clip head searched backwards
 MAX_HEAD_LONG_SIDE = 1920  # px: larger head frames are shrunk while held for the backward pass
+HEAD_VIEW_LOSS = 0.1       # a backward detection may have at most this share fewer landmarks
+                           # inside the image than the first sure one (a person leaving view)
 _log = logging.getLogger(__name__)
 
 
@@ -398,8 +400,9 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
     backwards from just after it: the tracker, started on the person, often keeps them where
     the detector alone could not find them (Sports2D's demo: frames 0-7, against a sun flare).
     Backward detections are kept from the first sure frame down while each is found, is the
-    person of the frame after it, is in view (mean visibility MIN_SEED_VISIBILITY) and has a
-    sure mask (mask_quality.band_limit), and only if the backward pass found the forward
+    person of the frame after it, has about as many landmarks inside the image as the first
+    sure one (HEAD_VIEW_LOSS: a person walking into view is not followed back out of it) and
+    has a sure mask (mask_quality.band_limit), and only if the backward pass found the forward
     pass's person at the first sure frame. regions: the image boxes the forward pass was
     masked to."""
     first = int(np.argmax(obs.detected)) if obs.detected.any() else 0
@@ -413,14 +416,15 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
         return obs   # the backward pass followed someone else
     limit = np.inf if obs.masks is None else band_limit(
         band_width(obs.masks[obs.detected]), _band_bound(obs.masks, cfg))
+    in_view = _share_in_image(obs.keypoints2d[first], obs.image_size) - HEAD_VIEW_LOSS
     kept = []
     for i in range(first - 1, -1, -1):
         f = found[i]
         if f is None or not _same_person(found[i + 1].keypoints2d, f.keypoints2d) \
-                or f.keypoints2d[:, 2].mean() < MIN_SEED_VISIBILITY or (
+                or _share_in_image(f.keypoints2d, obs.image_size) < in_view or (
                     obs.masks is not None and f.mask is not None
                     and not band_width(f.mask[None])[0] <= limit):
-            break   # lost, jumped to someone else, barely in view, or torn
+            break   # lost, jumped to someone else, leaving the picture, or torn
         kept.append(i)
     if not kept:
         return obs
@@ -449,6 +453,13 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
 def _band_bound(masks: np.ndarray, cfg: ObserveConfig) -> float:
     """cfg.unsure_mask_band (mask pixels at a 256-pixel mask) at these masks' size."""
     return cfg.unsure_mask_band * max(np.asarray(masks).shape[1:]) / 256
+
+
+def _share_in_image(keypoints2d: np.ndarray, image_size: tuple[int, int]) -> float:
+    """The share of a detection's (33, 3) landmarks that lie inside the image. (MediaPipe's
+    visibilities do not say it: a person mostly beyond the edge still scores 0.9.)"""
+    x, y = keypoints2d[:, 0], keypoints2d[:, 1]
+    return float(np.mean((x >= 0) & (x < image_size[0]) & (y >= 0) & (y < image_size[1])))
 
 
 def _same_person(a: np.ndarray, b: np.ndarray) -> bool:
