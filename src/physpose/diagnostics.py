@@ -101,6 +101,12 @@ def person_jumps(keypoints2d: np.ndarray, detected: np.ndarray, fps: float) -> l
     return jumps
 
 
+def inside_image(keypoints2d: np.ndarray, image_size: tuple[int, int]) -> np.ndarray:
+    """(...,) bool: which landmarks (..., 3) lie inside an image of (width, height) pixels."""
+    x, y = keypoints2d[..., 0], keypoints2d[..., 1]
+    return (x >= 0) & (x < image_size[0]) & (y >= 0) & (y < image_size[1])
+
+
 def hidden_feet_share(keypoints2d: np.ndarray, valid: np.ndarray,
                       image_size: tuple[int, int]) -> float:
     """Share of the frames with landmarks (`valid`) in which no ankle, heel or toe landmark is
@@ -110,10 +116,7 @@ def hidden_feet_share(keypoints2d: np.ndarray, valid: np.ndarray,
     if not valid.any():
         return 0.0
     feet = keypoints2d[valid][:, FOOT_LANDMARKS]
-    width, height = image_size
-    inside = (feet[..., 0] >= 0) & (feet[..., 0] < width) & (feet[..., 1] >= 0) \
-        & (feet[..., 1] < height)
-    seen = (inside & (feet[..., 2] >= MIN_CONFIDENCE)).any(axis=1)
+    seen = (inside_image(feet, image_size) & (feet[..., 2] >= MIN_CONFIDENCE)).any(axis=1)
     return float(1.0 - seen.mean())
 
 

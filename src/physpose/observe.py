@@ -62,7 +62,8 @@ from tqdm import tqdm
 from physpose import video as videolib
 from physpose.cache import Cache, stage_key
 from physpose.camera_motion import estimate_camera_motion, stabilize
-from physpose.diagnostics import image_box_corners, image_boxes, person_jumps
+from physpose.diagnostics import (image_box_corners, image_boxes, inside_image,
+                                  person_jumps)
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
 from physpose.mask_quality import band_limit, band_width, unsure_frames
@@ -217,6 +218,16 @@ def detect_in_crop(detector: PoseDetector, image: np.ndarray, box: np.ndarray,
     return FrameDetection(keypoints2d=kp, world_landmarks=found.world_landmarks, mask=mask)
 
 
+def _fill_all_gaps(kp: np.ndarray, world: np.ndarray | None, masks: np.ndarray | None,
+                   detected: np.ndarray, max_gap: int) -> tuple:
+    """fill_gaps on the landmarks, world landmarks and masks (those given) alike: (kp, world,
+    masks, interpolated)."""
+    kp, interpolated = fill_gaps(kp, detected, max_gap)
+    world = None if world is None else fill_gaps(world, detected, max_gap)[0]
+    masks = None if masks is None else fill_gaps(masks, detected, max_gap)[0]
+    return kp, world, masks, interpolated
+
+
 def fill_gaps(values: np.ndarray, detected: np.ndarray, max_gap: int) -> tuple[np.ndarray, np.ndarray]:
     """Linearly interpolate runs of at most `max_gap` undetected frames between detected ones.
 
@@ -360,10 +371,8 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
         masks = None if masks is None else masks[:read]
     if check or read == 0:
         _check_detection_rate(info.path, int(detected.sum()), read, cfg)
-    kp, interpolated = fill_gaps(kp, detected, cfg.max_gap_frames)
-    world, _ = fill_gaps(world, detected, cfg.max_gap_frames)
-    if masks is not None:
-        masks, _ = fill_gaps(masks, detected, cfg.max_gap_frames)
+    kp, world, masks, interpolated = _fill_all_gaps(kp, world, masks, detected,
+                                                    cfg.max_gap_frames)
     return Observations(
         source=str(info.path), fps=plan.fps, image_size=info.image_size,
         timestamps=plan.timestamps[:read].astype(np.float64), keypoints2d=kp, detected=detected,
@@ -381,15 +390,15 @@ def _drop_unsure(obs: Observations, cfg: ObserveConfig) -> Observations:
         return obs
     detected = obs.detected & ~unsure
 
-    def refill(values: np.ndarray) -> np.ndarray:
-        kept = np.where(detected.reshape((-1,) + (1,) * (values.ndim - 1)), values, 0)
-        return fill_gaps(kept.astype(values.dtype), detected, cfg.max_gap_frames)[0]
+    def kept(values: np.ndarray | None) -> np.ndarray | None:
+        return None if values is None else np.where(
+            detected.reshape((-1,) + (1,) * (values.ndim - 1)), values, 0).astype(values.dtype)
 
-    _, interpolated = fill_gaps(obs.keypoints2d, detected, cfg.max_gap_frames)
-    return obs.replace(
-        keypoints2d=refill(obs.keypoints2d), detected=detected, interpolated=interpolated,
-        world_landmarks=None if obs.world_landmarks is None else refill(obs.world_landmarks),
-        masks=refill(obs.masks), unsure=unsure)
+    kp, world, masks, interpolated = _fill_all_gaps(
+        kept(obs.keypoints2d), kept(obs.world_landmarks), kept(obs.masks), detected,
+        cfg.max_gap_frames)
+    return obs.replace(keypoints2d=kp, detected=detected, interpolated=interpolated,
+                       world_landmarks=world, masks=masks, unsure=unsure)
 
 
 def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig,
@@ -416,12 +425,13 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
         return obs   # the backward pass followed someone else
     limit = np.inf if obs.masks is None else band_limit(
         band_width(obs.masks[obs.detected]), _band_bound(obs.masks, cfg))
-    in_view = _share_in_image(obs.keypoints2d[first], obs.image_size) - HEAD_VIEW_LOSS
+    # MediaPipe's visibilities do not tell a person beyond the edge (0.9 for one mostly out).
+    in_view = inside_image(obs.keypoints2d[first], obs.image_size).mean() - HEAD_VIEW_LOSS
     kept = []
     for i in range(first - 1, -1, -1):
         f = found[i]
         if f is None or not _same_person(found[i + 1].keypoints2d, f.keypoints2d) \
-                or _share_in_image(f.keypoints2d, obs.image_size) < in_view or (
+                or inside_image(f.keypoints2d, obs.image_size).mean() < in_view or (
                     obs.masks is not None and f.mask is not None
                     and not band_width(f.mask[None])[0] <= limit):
             break   # lost, jumped to someone else, leaving the picture, or torn
@@ -453,13 +463,6 @@ def _recover_head(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Obser
 def _band_bound(masks: np.ndarray, cfg: ObserveConfig) -> float:
     """cfg.unsure_mask_band (mask pixels at a 256-pixel mask) at these masks' size."""
     return cfg.unsure_mask_band * max(np.asarray(masks).shape[1:]) / 256
-
-
-def _share_in_image(keypoints2d: np.ndarray, image_size: tuple[int, int]) -> float:
-    """The share of a detection's (33, 3) landmarks that lie inside the image. (MediaPipe's
-    visibilities do not say it: a person mostly beyond the edge still scores 0.9.)"""
-    x, y = keypoints2d[:, 0], keypoints2d[:, 1]
-    return float(np.mean((x >= 0) & (x < image_size[0]) & (y >= 0) & (y < image_size[1])))
 
 
 def _same_person(a: np.ndarray, b: np.ndarray) -> bool:
