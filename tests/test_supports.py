@@ -34,6 +34,19 @@ def test_a_box_under_feet_that_stay_raised(standing):
     assert box2.center[0] + box2.size[0] / 2 < box.center[0] + box.size[0] / 2 + 0.25
 
 
+def test_the_kinematic_fit_stands_raised_feet_on_the_support_top(standing):
+    joints, fps = standing
+    up = joints.copy()
+    up[10:40, :, 2] += 1.5
+    up[10:12, :, 2] -= 0.6                     # stepping up: feet still below the top
+    (run,) = diagnostics.raised_runs(up, fps)
+    (box,) = supports.support_boxes(up, [run], fps)
+    heights = supports.support_heights(up, [run], fps)
+    assert heights[12:40] == pytest.approx(box.center[2] + box.size[2] / 2)
+    assert (heights[:12] == 0).all() and (heights[40:] == 0).all()
+    assert (supports.support_heights(joints, [], fps) == 0).all()
+
+
 @pytest.fixture(scope="module")
 def sitting():
     from physpose.dynamics.synthetic import sitting_scene

@@ -2,7 +2,8 @@
 something physpose was not told about, the simplest such thing.
 
 - `support_boxes`: a box on the floor under feet that stay raised (`diagnostics.raised_runs`:
-  the person stands on a box, a step, a ledge).
+  the person stands on a box, a step, a ledge); `support_heights`: its top frame by frame,
+  for the kinematic fit to stand the feet on.
 - `seated_runs` / `seat_boxes`: a seat under a person who sits (thighs level, the trunk well
   behind the feet, still, for a second or more): no body can hold that on its feet alone, so
   without a seat the simulated body falls backwards.
@@ -20,6 +21,30 @@ from physpose.scene import Box
 
 SUPPORT_MARGIN = 0.3       # m added on every side of the feet's extent for a support box
 RESTING_SPEED = 0.5        # m/s, a foot slower than this rests on its support
+ON_SUPPORT = 0.1           # m, feet further below a support's top are stepping on or off it
+
+
+def _resting_soles(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: float
+                   ) -> list[tuple[int, int, np.ndarray]]:
+    """(first, last, resting sole points (N, 3)) of each run with frames in which the lower
+    foot is slower than RESTING_SPEED (runs without such frames are left out)."""
+    soles = foot_points(np.asarray(joints, dtype=float))       # (T, 2, P, 3)
+    centres = soles.mean(axis=2)                                 # (T, 2, 3)
+    speed = np.linalg.norm(np.gradient(centres, axis=0), axis=-1) * fps
+    lower = soles[..., 2].min(axis=2).argmin(axis=1)             # (T,) the lower foot
+    resting = speed[np.arange(len(soles)), lower] < RESTING_SPEED
+    out = []
+    for a, b, _ in runs:
+        frames = a + np.flatnonzero(resting[a:b + 1])
+        if len(frames):
+            out.append((a, b, soles[frames]))
+    return out
+
+
+def _top(resting: np.ndarray) -> float:
+    """A support's top under resting soles (N, 2, P, 3): the 10th percentile of their lowest
+    point (they stand on it, not in it)."""
+    return float(np.percentile(resting[..., 2].min(axis=(1, 2)), 10))
 
 
 def support_boxes(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: float
@@ -30,26 +55,32 @@ def support_boxes(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: f
     on it, not in it), its sides SUPPORT_MARGIN beyond where the resting soles are. The
     estimate says that something holds the person up there; this is the simplest such thing.
     A stretch without resting frames gets none."""
-    if not runs:
-        return ()
-    soles = foot_points(np.asarray(joints, dtype=float))       # (T, 2, P, 3)
-    centres = soles.mean(axis=2)                                 # (T, 2, 3)
-    speed = np.linalg.norm(np.gradient(centres, axis=0), axis=-1) * fps
-    lower = soles[..., 2].min(axis=2).argmin(axis=1)             # (T,) the lower foot
-    resting = speed[np.arange(len(soles)), lower] < RESTING_SPEED
     boxes = []
-    for a, b, _ in runs:
-        frames = a + np.flatnonzero(resting[a:b + 1])
-        if not len(frames):
-            continue
-        points = soles[frames].reshape(-1, 3)
-        top = float(np.percentile(soles[frames, ..., 2].min(axis=(1, 2)), 10))
+    for _, _, resting in _resting_soles(joints, runs, fps):
+        top = _top(resting)
+        points = resting.reshape(-1, 3)
         lo = points[:, :2].min(axis=0) - SUPPORT_MARGIN
         hi = points[:, :2].max(axis=0) + SUPPORT_MARGIN
         centre = 0.5 * (lo + hi)
         boxes.append(Box(center=(float(centre[0]), float(centre[1]), top / 2),
                          size=(float(hi[0] - lo[0]), float(hi[1] - lo[1]), top)))
     return tuple(boxes)
+
+
+def support_heights(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: float
+                    ) -> np.ndarray:
+    """(T,) the height the feet stand on in each frame of a motion (T, 21, 3): the top of
+    `support_boxes`' box through each raised run, 0 (the floor) elsewhere and in the run's
+    frames whose feet are more than ON_SUPPORT below that top (stepping up or down: a top
+    above them would push them up)."""
+    joints = np.asarray(joints, dtype=float)
+    lowest = foot_points(joints)[..., 2].min(axis=(1, 2))
+    heights = np.zeros(len(joints))
+    for a, b, resting in _resting_soles(joints, runs, fps):
+        top = _top(resting)
+        on = lowest[a:b + 1] >= top - ON_SUPPORT
+        heights[a:b + 1] = np.where(on, top, 0.0)
+    return heights
 
 
 SEAT_THIGH_ANGLE = np.radians(35.0)  # thighs within this of level ...

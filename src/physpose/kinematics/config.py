@@ -105,6 +105,7 @@ class GroundConfig:
     depth_gain_sigma: float = 0.4     # plane fit: prior of g, depth errors = g x relative depth
     rounds: int = 1                   # (estimate T_g, re-fit poses) rounds
     level_percentile: float = 10.0    # no +G: % of frames whose lowest sole point is below z=0
+    raised_supports: bool = True      # feet that stay raised (a box, a step) stand on its top
 
 
 @dataclass(frozen=True)

@@ -116,10 +116,11 @@ def pad(a: np.ndarray, length: int) -> np.ndarray:
 
 
 def data_for(ev: Evidence, frames: np.ndarray, m_per_px: np.ndarray, plane: np.ndarray,
-             length: int) -> Data:
+             length: int, support: np.ndarray | None = None) -> Data:
     """Objective data for the given frames (indices into ev), padded to `length` frames.
 
-    m_per_px: (len(frames),) metres per pixel at the person; plane: (4,) n, d.
+    m_per_px: (len(frames),) metres per pixel at the person; plane: (4,) n, d; support:
+    (len(frames),) m above the plane where the feet stand (default 0, the floor).
     """
     n = len(frames)
     weight = np.zeros(length)
@@ -130,4 +131,6 @@ def data_for(ev: Evidence, frames: np.ndarray, m_per_px: np.ndarray, plane: np.n
         m_per_px=jnp.asarray(pad(m_per_px, length)),
         world=jnp.asarray(pad(ev.world_ray[frames], length)), w3d=jnp.asarray(w2d),
         R_ray=jnp.asarray(pad(ev.R_ray[frames], length)), frame_weight=jnp.asarray(weight),
-        plane=jnp.asarray(np.asarray(plane, dtype=float)), fps=jnp.asarray(ev.fps))
+        plane=jnp.asarray(np.asarray(plane, dtype=float)), fps=jnp.asarray(ev.fps),
+        support=jnp.asarray(pad(np.zeros(n) if support is None
+                                else np.asarray(support, dtype=float), length)))

@@ -9,7 +9,8 @@ Steps (timed and logged by name):
 4. pose (+O, with +T): all frames jointly: 2d re-projection + 3d agreement + prior + limits
    (+ smoothness).
 5. ground (+G): T_g from the posed body (L_gp), then the poses again with the plane fixed and
-   the contact term on. Without +G, the level-camera guess.
+   the contact term on; where the feet stay raised (a box, a step), once more standing them
+   on its top. Without +G, the level-camera guess.
 6. world frame (camera.world_from_plane) and the result in the skeleton's qpos layout.
 """
 
@@ -27,6 +28,7 @@ import numpy as np
 from jax.experimental import enable_x64
 from scipy.spatial.transform import Rotation
 
+from physpose import diagnostics, supports
 from physpose.cache import Cache, stage_key
 from physpose.paths import cache_dir
 from physpose.fk import fk_qpos, segment_frames
@@ -110,13 +112,15 @@ class _Context:
     problem: Problem
     timings: dict
 
-    def problem_at(self, params: Params, plane: np.ndarray = np.zeros(4)) -> Problem:
-        """The problem with the reprojection's depth scale taken from params' root depths."""
+    def problem_at(self, params: Params, plane: np.ndarray = np.zeros(4),
+                   support: np.ndarray | None = None) -> Problem:
+        """The problem with the reprojection's depth scale taken from params' root depths
+        (support: per-frame heights above the plane the feet stand on, default the floor)."""
         n = self.ev.num_frames
         return make_problem(self.ev, np.arange(n), self.problem.length, np.asarray(
             self.problem.fixed.R0)[:n], self.K, self.focal_prior,
             np.asarray(params.root_pos)[:n, 2], self.surface.offset, self.height,
-            self.problem.settings, plane, self.cfg.pose.hard_limits)
+            self.problem.settings, plane, self.cfg.pose.hard_limits, support)
 
 
 class _Timer:
@@ -232,6 +236,10 @@ def fit_variants(obs: Observations, variants: tuple[str, ...], cfg: KinematicCon
                 p, losses = problem.run(p, free, _pose_terms(cfg, temporal, True, focal),
                                         cfg.pose.iterations)
                 timer.lap("ground_pose")
+            if cfg.ground_plane.raised_supports:
+                p, problem, losses = _stand_on_supports(
+                    ctx, p, problem, losses, _pose_terms(cfg, temporal, True, focal), free,
+                    timer)
             stages[name] = (p, problem, losses)
         for v in variants:
             p, problem, losses = stages[v]
@@ -251,6 +259,26 @@ def _estimate_ground(ctx: _Context, params: Params, problem: Problem) -> np.ndar
     plane, _ = estimate_plane(points, ctx.surface.left_foot, ctx.surface.right_foot, com,
                               ctx.cfg.ground_plane)
     return plane
+
+
+def _stand_on_supports(ctx: _Context, params: Params, problem: Problem, losses: dict,
+                       terms: dict, free: tuple[str, ...], timer: _Timer
+                       ) -> tuple[Params, Problem, dict]:
+    """Where the fitted feet stay raised above the floor for a while (diagnostics.raised_runs:
+    the person stands on a box, a step), the poses again with the ground and skate terms
+    standing the feet on that support's top (supports.support_heights, the top of the box
+    the physics will get) instead of the floor; elsewhere nothing changes. Without it those
+    terms never reach feet a metre up, and their depth wanders as nothing else holds it."""
+    plane = np.asarray(problem.data.plane)
+    joints = _result(ctx, ctx.cfg, params, problem, plane, {}, {}).joints
+    fps = float(ctx.obs.fps)
+    heights = supports.support_heights(joints, diagnostics.raised_runs(joints, fps), fps)
+    if not heights.any():
+        return params, problem, losses
+    problem = ctx.problem_at(params, plane, heights)
+    params, losses = problem.run(params, free, terms, ctx.cfg.pose.iterations)
+    timer.lap("support_pose")
+    return params, problem, losses
 
 
 def _level_ground(ctx: _Context, params: Params, problem: Problem) -> np.ndarray:

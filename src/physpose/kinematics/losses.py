@@ -57,6 +57,8 @@ class Data(NamedTuple):
     frame_weight: jax.Array   # (T,) 1 for real frames, 0 for padding
     plane: jax.Array          # (4,) ground n (3) and d: n . x + d = 0
     fps: jax.Array            # () Hz
+    support: jax.Array        # (T,) m above the plane where the feet stand (0: the floor;
+                              # a raised support's top, supports.support_heights)
 
 
 def rotvec_matrix(v):
@@ -166,17 +168,18 @@ def ground_term(distances, k, delta):
     return jnp.sqrt(jnp.sum(low * low, -1) + 1e-8)
 
 
-def signed_distances(surface: SurfacePoints, pose: Pose, plane):
-    """Signed distances (T, P) of the surface points to the plane n . x + d = 0."""
+def signed_distances(surface: SurfacePoints, pose: Pose, plane, support=0.0):
+    """Signed distances (T, P) of the surface points to the plane n . x + d = 0, raised by
+    each frame's support height (T,) where there is one."""
     pts = place(surface, pose.seg_pos, pose.seg_rot, jnp)
-    return pts @ plane[:3] + plane[3]
+    return pts @ plane[:3] + plane[3] - jnp.reshape(support, (-1, 1))
 
 
 def cost_ground(pose: Pose, data: Data, surface: SurfacePoints, k, delta, foot_delta,
                 body_weight, scale):
     """(+G) L_gp with the plane fixed, per `scale` metres: each foot's k lowest points (clipped
     at foot_delta) and body_weight x the whole body's (clipped at delta)."""
-    dist = signed_distances(surface, pose, data.plane)
+    dist = signed_distances(surface, pose, data.plane, data.support)
     per = body_weight * ground_term(dist, k, delta)
     for mask in (surface.left_foot, surface.right_foot):
         per = per + ground_term(dist[:, np.flatnonzero(mask)], k, foot_delta)
@@ -186,11 +189,12 @@ def cost_ground(pose: Pose, data: Data, surface: SurfacePoints, k, delta, foot_d
 def cost_ground_skate(pose: Pose, data: Data, surface: SurfacePoints, height_scale, sigma):
     """(+GT) Sliding of soles on the ground: horizontal velocities (m/s / sigma) of the sole
     points, each weighted by exp(-height / height_scale) (about 1 in contact, the weight itself
-    not differentiated: the term must not lift feet to escape), mean over sole points."""
+    not differentiated: the term must not lift feet to escape), mean over sole points. Heights
+    are above each frame's support (data.support) where there is one."""
     soles = np.flatnonzero(surface.left_foot | surface.right_foot)
     pts = place(surface, pose.seg_pos, pose.seg_rot, jnp)[:, soles]
     n = data.plane[:3]
-    h = jnp.maximum(pts @ n + data.plane[3], 0.0)
+    h = jnp.maximum(pts @ n + data.plane[3] - data.support[:, None], 0.0)
     w = jax.lax.stop_gradient(jnp.exp(-0.5 * (h[1:] + h[:-1]) / height_scale))
     v = jnp.diff(pts, axis=0) * data.fps
     vh = v - (v @ n)[..., None] * n

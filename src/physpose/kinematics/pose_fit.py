@@ -138,15 +138,16 @@ def make_params(root_pos, root_rot_delta, angles, bones, depth_scale, world_scal
 def make_problem(ev: Evidence, frames: np.ndarray, length: int, R0: np.ndarray, K: np.ndarray,
                  focal_prior: float, root_depth: np.ndarray, surface_offset: np.ndarray,
                  height: float | None, settings: Settings, plane: np.ndarray,
-                 hard_limits: bool) -> Problem:
+                 hard_limits: bool, support: np.ndarray | None = None) -> Problem:
     """A Problem over `frames` (indices into ev) with reference orientations R0 (n, 3, 3) and
-    the reprojection's metres-per-pixel from the root depths (n,)."""
+    the reprojection's metres-per-pixel from the root depths (n,); support (n,): the height
+    above the plane the feet stand on in each frame (default 0, the floor)."""
     fixed = Fixed(R0=jnp.asarray(pad(R0, length)), principal=jnp.asarray(K[:2, 2]),
                   surface_offset=jnp.asarray(surface_offset),
                   height=jnp.asarray(float(height or 0.0)),
                   log_focal_prior=jnp.asarray(np.log(focal_prior)))
     m_per_px = np.maximum(root_depth, 0.5) / K[0, 0]
-    data = data_for(ev, frames, m_per_px, plane, length)
+    data = data_for(ev, frames, m_per_px, plane, length, support)
     return Problem(frames=np.asarray(frames), length=length, fixed=fixed, data=data,
                    settings=settings, hard_limits=hard_limits)
 
