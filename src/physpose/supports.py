@@ -26,8 +26,11 @@ ON_SUPPORT = 0.1           # m, feet further below a support's top are stepping 
 
 def _resting_soles(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: float
                    ) -> list[tuple[int, int, np.ndarray]]:
-    """(first, last, resting sole points (N, 3)) of each run with frames in which the lower
-    foot is slower than RESTING_SPEED (runs without such frames are left out)."""
+    """(first, last, both feet's sole points (N, 2, P, 3) in its N resting frames) of each run
+    with frames in which the lower foot is slower than RESTING_SPEED (runs without such
+    frames are left out)."""
+    if not runs:
+        return []
     soles = foot_points(np.asarray(joints, dtype=float))       # (T, 2, P, 3)
     centres = soles.mean(axis=2)                                 # (T, 2, 3)
     speed = np.linalg.norm(np.gradient(centres, axis=0), axis=-1) * fps
