@@ -10,7 +10,7 @@ from test_kinematics_fixtures import synthetic_clip
 from physpose.errors import PhysposeError
 from physpose.fk import fk_qpos
 from physpose.kinematics import KinematicConfig, fit_kinematics
-from physpose.kinematics.config import VARIANT_NAMES
+from physpose.kinematics.config import VARIANT_NAMES, GroundConfig
 from physpose.kinematics.fit import fit_variants
 from physpose.joints import LANDMARK_INDEX
 from physpose.metrics import foot_points, transform_points
@@ -114,7 +114,7 @@ def test_feet_that_stay_raised_stand_still_on_their_support():
     """A person standing still, on the floor, then on a 1 m platform for 1.1 s, then on the
     floor again, seen with noise: the ground and skate terms hold the feet on the platform's
     top as they hold them on the floor (without the support pass the raised feet jitter over
-    three times as fast as the floor's, 0.26 against 0.07 m/s)."""
+    three times as fast as the floor's, 0.26 against 0.07 m/s, and stand 8 mm off the top)."""
     def on_a_platform(q):
         q[:] = q[0]
         q[15:43, 2] += 1.0
@@ -129,7 +129,18 @@ def test_feet_that_stay_raised_stand_still_on_their_support():
     raised = speed[18:40].mean()
     assert raised < 1.5 * floor, (raised, floor)
     lowest = soles[18:40, ..., 2].min(axis=-1)
-    assert np.abs(lowest - 1.0).mean() < 0.01
+    assert np.abs(lowest - 1.0).mean() < 0.004
+    # The fit says what it stood them on: the platform's top there, the floor elsewhere.
+    assert fit.support_heights[18:40] == pytest.approx(1.0, abs=0.01)
+    assert (fit.support_heights[:12] == 0).all() and (fit.support_heights[46:] == 0).all()
+
+
+def test_without_raised_feet_the_support_pass_changes_nothing(noisy_fits):
+    clip, fits = noisy_fits
+    off = fit_variants(clip.observations, ("SO+GT",), KinematicConfig(
+        use_cache=False, ground_plane=GroundConfig(raised_supports=False)))["SO+GT"]
+    assert fits["SO+GT"].support_heights is None
+    assert np.array_equal(off.qpos, fits["SO+GT"].qpos)
 
 
 def test_cache_returns_the_same_fit(perfect, tmp_path, monkeypatch):

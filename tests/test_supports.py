@@ -34,7 +34,7 @@ def test_a_box_under_feet_that_stay_raised(standing):
     assert box2.center[0] + box2.size[0] / 2 < box.center[0] + box.size[0] / 2 + 0.25
 
 
-def test_the_kinematic_fit_stands_raised_feet_on_the_support_top(standing):
+def test_support_heights_are_the_box_top_where_the_feet_are_on_it(standing):
     joints, fps = standing
     up = joints.copy()
     up[10:40, :, 2] += 1.5
@@ -45,6 +45,10 @@ def test_the_kinematic_fit_stands_raised_feet_on_the_support_top(standing):
     assert heights[12:40] == pytest.approx(box.center[2] + box.size[2] / 2)
     assert (heights[:12] == 0).all() and (heights[40:] == 0).all()
     assert (supports.support_heights(joints, [], fps) == 0).all()
+    # A box built where the kinematic fit stood the feet takes the fit's top.
+    (fitted,) = supports.support_boxes(up, [run], fps, np.where(heights > 0, 1.45, 0.0))
+    assert fitted.center[2] + fitted.size[2] / 2 == pytest.approx(1.45)
+    assert fitted.size[:2] == box.size[:2]
 
 
 @pytest.fixture(scope="module")
@@ -54,6 +58,18 @@ def sitting():
     seated = build_body(bare.shape, sitting_scene(bare))
     fit, _, _ = simulated_clip(seated, "sit", seconds=3.0)
     return fit.joints, fit.fps, sitting_scene(bare).obstacles[0]
+
+
+def test_feet_hanging_from_a_seat_are_not_stood_on_anything(sitting):
+    joints, fps, _ = sitting
+    high = joints.copy()
+    high[..., 2] += 0.5                        # on a wall, the feet hanging half a metre up
+    runs = diagnostics.raised_runs(high, fps)
+    assert runs and supports.seated_runs(high, fps)
+    seated = np.zeros(len(high), bool)
+    for a, b, _ in supports.seated_runs(high, fps):
+        seated[a:b + 1] = True
+    assert (supports.support_heights(high, runs, fps)[seated] == 0).all()
 
 
 def test_a_seat_under_a_person_who_sits(sitting, standing):

@@ -172,7 +172,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                          **({"log": stderr_log} if progress else {}))
     lap("kinematics")
     raised = diagnostics.raised_runs(kin.joints, kin.fps)
-    boxes = supports.support_boxes(kin.joints, raised, kin.fps) if config.auto_support else ()
+    boxes = supports.support_boxes(kin.joints, raised, kin.fps, kin.support_heights) \
+        if config.auto_support else ()
     _warn(diagnostics.raised_message(raised, kin.fps, supported=bool(boxes)))
     seated = supports.seated_runs(kin.joints, kin.fps)
     seats = supports.seat_boxes(kin.joints, seated) if config.auto_support else ()

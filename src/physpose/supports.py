@@ -50,17 +50,19 @@ def _top(resting: np.ndarray) -> float:
     return float(np.percentile(resting[..., 2].min(axis=(1, 2)), 10))
 
 
-def support_boxes(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: float
-                  ) -> tuple[Box, ...]:
+def support_boxes(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: float,
+                  heights: np.ndarray | None = None) -> tuple[Box, ...]:
     """One box per `raised_runs` stretch, standing on the floor under the feet where they
     rest (the lower foot slower than RESTING_SPEED; a stretch can end in a leap off the
     support): its top at the 10th percentile of the resting feet's lowest point (they stand
-    on it, not in it), its sides SUPPORT_MARGIN beyond where the resting soles are. The
-    estimate says that something holds the person up there; this is the simplest such thing.
-    A stretch without resting frames gets none."""
+    on it, not in it), or where the kinematic fit stood the feet on a support in the
+    stretch (heights: its (T,) `support_heights`), at that top; its sides SUPPORT_MARGIN
+    beyond where the resting soles are. The estimate says that something holds the person
+    up there; this is the simplest such thing. A stretch without resting frames gets none."""
     boxes = []
-    for _, _, resting in _resting_soles(joints, runs, fps):
-        top = _top(resting)
+    for a, b, resting in _resting_soles(joints, runs, fps):
+        fitted = 0.0 if heights is None else float(np.max(heights[a:b + 1]))
+        top = fitted if fitted > 0 else _top(resting)
         points = resting.reshape(-1, 3)
         lo = points[:, :2].min(axis=0) - SUPPORT_MARGIN
         hi = points[:, :2].max(axis=0) + SUPPORT_MARGIN
@@ -73,16 +75,21 @@ def support_boxes(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: f
 def support_heights(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: float
                     ) -> np.ndarray:
     """(T,) the height the feet stand on in each frame of a motion (T, 21, 3): the top of
-    `support_boxes`' box through each raised run, 0 (the floor) elsewhere and in the run's
+    `support_boxes`' box through each raised run, 0 (the floor) elsewhere, in the run's
     frames whose feet are more than ON_SUPPORT below that top (stepping up or down: a top
-    above them would push them up)."""
+    above them would push them up) and where the person sits (`seated_runs`: feet hanging
+    from a seat are raised but stand on nothing)."""
     joints = np.asarray(joints, dtype=float)
-    lowest = foot_points(joints)[..., 2].min(axis=(1, 2))
     heights = np.zeros(len(joints))
+    if not runs:
+        return heights
+    lowest = foot_points(joints)[..., 2].min(axis=(1, 2))
     for a, b, resting in _resting_soles(joints, runs, fps):
         top = _top(resting)
         on = lowest[a:b + 1] >= top - ON_SUPPORT
         heights[a:b + 1] = np.where(on, top, 0.0)
+    for a, b, _ in seated_runs(joints, fps):
+        heights[a:b + 1] = 0.0
     return heights
 
 

@@ -123,6 +123,8 @@ def data_for(ev: Evidence, frames: np.ndarray, m_per_px: np.ndarray, plane: np.n
     (len(frames),) m above the plane where the feet stand (default 0, the floor).
     """
     n = len(frames)
+    if support is not None and np.shape(support) != (n,):
+        raise ValueError(f"support heights of shape {np.shape(support)} for {n} frames")
     weight = np.zeros(length)
     weight[:n] = 1.0
     w2d = pad(ev.weight[frames], length) * weight[:, None]

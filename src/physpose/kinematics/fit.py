@@ -48,7 +48,7 @@ from physpose.observations import Observations
 from physpose.shape import BodyShape
 from physpose.skeleton import NQ
 
-KINEMATICS_VERSION = 6  # bump when a change alters the result for the same input and config
+KINEMATICS_VERSION = 7  # bump when a change alters the result for the same input and config
 Log = Callable[[str], None]
 
 
@@ -265,10 +265,11 @@ def _stand_on_supports(ctx: _Context, params: Params, problem: Problem, losses: 
                        terms: dict, free: tuple[str, ...], timer: _Timer
                        ) -> tuple[Params, Problem, dict]:
     """Where the fitted feet stay raised above the floor for a while (diagnostics.raised_runs:
-    the person stands on a box, a step), the poses again with the ground and skate terms
-    standing the feet on that support's top (supports.support_heights, the top of the box
-    the physics will get) instead of the floor; elsewhere nothing changes. Without it those
-    terms never reach feet a metre up, and their depth wanders as nothing else holds it."""
+    the person stands on a box, a step), the poses again (all frames) with the ground and
+    skate terms standing the feet on that support's top (supports.support_heights; the fit's
+    result carries it, and the physics' support box is built at it) instead of the floor.
+    Without it those terms never reach feet a metre up, and their depth wanders as nothing
+    else holds it."""
     plane = np.asarray(problem.data.plane)
     joints = _result(ctx, ctx.cfg, params, problem, plane, {}, {}).joints
     fps = float(ctx.obs.fps)
@@ -324,10 +325,11 @@ def _result(ctx: _Context, cfg: KinematicConfig, params: Params, problem: Proble
     K[:2, 2] = np.asarray(problem.fixed.principal)
     losses = dict(losses, depth_scale=float(np.exp(np.asarray(params.log_depth_scale))),
                   world_scale=float(np.exp(np.asarray(params.log_world_scale))))
+    support = np.asarray(problem.data.support, dtype=float)[:n]
     return KinematicFit(fps=float(obs.fps), shape=shape, qpos=qpos, joints=joints,
                         landmarks=landmarks, camera_K=K, T_world2cam=T_world2cam,
                         variant=cfg.variant, ground_estimated=cfg.ground, losses=losses,
-                        timings=timings)
+                        timings=timings, support_heights=support if support.any() else None)
 
 
 def _observation_arrays(obs: Observations) -> dict:
@@ -343,9 +345,12 @@ def _to_arrays(fit: KinematicFit) -> dict[str, np.ndarray]:
     meta = {"fps": fit.fps, "shape": dataclasses.asdict(fit.shape), "variant": fit.variant,
             "ground_estimated": fit.ground_estimated, "losses": fit.losses,
             "timings": fit.timings}
-    return {"qpos": fit.qpos, "joints": fit.joints, "landmarks": fit.landmarks,
-            "camera_K": fit.camera_K, "T_world2cam": fit.T_world2cam,
-            "meta": np.array(json.dumps(meta))}
+    arrays = {"qpos": fit.qpos, "joints": fit.joints, "landmarks": fit.landmarks,
+              "camera_K": fit.camera_K, "T_world2cam": fit.T_world2cam,
+              "meta": np.array(json.dumps(meta))}
+    if fit.support_heights is not None:
+        arrays["support_heights"] = fit.support_heights
+    return arrays
 
 
 def _from_arrays(a: dict[str, np.ndarray]) -> KinematicFit:
@@ -354,4 +359,4 @@ def _from_arrays(a: dict[str, np.ndarray]) -> KinematicFit:
                         joints=a["joints"], landmarks=a["landmarks"], camera_K=a["camera_K"],
                         T_world2cam=a["T_world2cam"], variant=meta["variant"],
                         ground_estimated=meta["ground_estimated"], losses=meta["losses"],
-                        timings=meta["timings"])
+                        timings=meta["timings"], support_heights=a.get("support_heights"))

@@ -26,6 +26,8 @@ class KinematicFit:
     variant: str                 # "S", "SO", "SO+G", "SO+T" or "SO+GT"
     ground_estimated: bool       # True when T_g was fitted (+G); else a level-camera guess
     losses: dict = dataclasses.field(default_factory=dict)   # final value of each loss term
+    support_heights: np.ndarray | None = None  # (T,) m, the raised support's top the feet were
+                                 # stood on in each frame (0: the floor); None: no raised feet
     timings: dict = dataclasses.field(default_factory=dict)  # seconds per sub-step
 
     @property
