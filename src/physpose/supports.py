@@ -24,14 +24,11 @@ RESTING_SPEED = 0.5        # m/s, a foot slower than this rests on its support
 ON_SUPPORT = 0.1           # m, feet further below a support's top are stepping on or off it
 
 
-def _resting_soles(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: float
+def _resting_soles(soles: np.ndarray, runs: list[tuple[int, int, float]], fps: float
                    ) -> list[tuple[int, int, np.ndarray]]:
     """(first, last, both feet's sole points (N, 2, P, 3) in its N resting frames) of each run
     with frames in which the lower foot is slower than RESTING_SPEED (runs without such
-    frames are left out)."""
-    if not runs:
-        return []
-    soles = foot_points(np.asarray(joints, dtype=float))       # (T, 2, P, 3)
+    frames are left out). soles: (T, 2, P, 3) the motion's `foot_points`."""
     centres = soles.mean(axis=2)                                 # (T, 2, 3)
     speed = np.linalg.norm(np.gradient(centres, axis=0), axis=-1) * fps
     lower = soles[..., 2].min(axis=2).argmin(axis=1)             # (T,) the lower foot
@@ -59,8 +56,11 @@ def support_boxes(joints: np.ndarray, runs: list[tuple[int, int, float]], fps: f
     stretch (heights: its (T,) `support_heights`), at that top; its sides SUPPORT_MARGIN
     beyond where the resting soles are. The estimate says that something holds the person
     up there; this is the simplest such thing. A stretch without resting frames gets none."""
+    if not runs:
+        return ()
     boxes = []
-    for a, b, resting in _resting_soles(joints, runs, fps):
+    for a, b, resting in _resting_soles(foot_points(np.asarray(joints, dtype=float)), runs,
+                                        fps):
         fitted = 0.0 if heights is None else float(np.max(heights[a:b + 1]))
         top = fitted if fitted > 0 else _top(resting)
         points = resting.reshape(-1, 3)
@@ -83,8 +83,9 @@ def support_heights(joints: np.ndarray, runs: list[tuple[int, int, float]], fps:
     heights = np.zeros(len(joints))
     if not runs:
         return heights
-    lowest = foot_points(joints)[..., 2].min(axis=(1, 2))
-    for a, b, resting in _resting_soles(joints, runs, fps):
+    soles = foot_points(joints)
+    lowest = soles[..., 2].min(axis=(1, 2))
+    for a, b, resting in _resting_soles(soles, runs, fps):
         top = _top(resting)
         on = lowest[a:b + 1] >= top - ON_SUPPORT
         heights[a:b + 1] = np.where(on, top, 0.0)
