@@ -4,8 +4,12 @@ Pose detectors now and then label the left leg (or arm) as the right one for a f
 flip the labels of the whole body at once (front/back confusion, e.g. while the person turns).
 The landmarks with a side form three groups: legs, arms and the rest (trunk and face). A
 frame's state says which groups are exchanged (2^3 states); the Viterbi path minimises
-- motion: how far the landmarks move between frames (2d, hip-centred, per torso length), each
-  landmark's squared motion saturating at MOTION_CAP so an outlier detection cannot force a swap;
+- motion: how far the landmarks move between frames, each landmark's squared motion saturating
+  at MOTION_CAP so an outlier detection cannot force a swap; in the image (hip-centred, per torso
+  length) and in MediaPipe's 3d (hip-centred, metres). The 3d term tells the legs apart where they
+  cross in the image but not in depth (walking seen from the front); without it a false swap
+  costs nothing at the crossing, and the attachment below, biased by the 3d error for a second at
+  a time, decided whole strides wrongly (a crouched walk: the legs exchanged for 25 frames);
 - attachment: a limb's labels relative to the trunk's cost the excess length of the knees'
   (elbows') distances to the hips (shoulders) of their own side over the crossed ones, in
   MediaPipe's 3d. This is what decides the legs, whose left and right cross each other in the
@@ -17,8 +21,11 @@ MOTION_SIGMA_MIN, the detector's own frame-to-frame noise, which it reaches at 5
 where the floor lifts the scale by a factor k, the attachment costs are divided by k^2 like
 the motion costs: a detector's 3d error persists over frames, so sampling the same seconds
 more densely must not outvote the motion and the swap events' cost.
-The labelling as a whole (all groups exchanged in every frame) is a mirror image with the same
-cost; of the two, the one keeping the trunk's detected labels in more frames wins. Swapped
+The labelling of a stretch of detections as a whole (all groups exchanged in each of its frames)
+is a mirror image with about the same cost where nothing but a gap's weak motion term links it to
+the rest (STRETCH_GAP or longer); in each such stretch the one keeping the trunk's detected
+labels in more frames wins (a person seen again after a gap may be labelled either way by the
+path). Swapped
 frames exchange the left and right landmarks (2d, 3d and confidences).
 """
 
@@ -43,8 +50,10 @@ ATTACH = {"legs": ("knee", "hip"), "arms": ("elbow", "shoulder")}  # limb joint,
 SWITCH_COST = 4.0     # cost of a swap event, in units of the squared motion below
 MOTION_SIGMA = 0.25   # torso lengths: typical landmark motion between frames at ~25 fps
 MOTION_SIGMA_MIN = 0.125  # torso lengths: the detector's frame-to-frame noise (reached at 50 fps)
+MOTION_SIGMA_3D = 0.125   # m: the same in MediaPipe's 3d (a torso is about 0.5 m); same floor ratio
 MOTION_CAP = 9.0      # a landmark's (motion / sigma)^2 saturates towards this: c/(1 + c/cap)
 ATTACH_SIGMA = 0.02   # m of excess limb-to-root distance per unit cost
+STRETCH_GAP = 0.2     # s without evidence that end a stretch (its labels judged on their own)
 
 
 def _pairs(parts: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
@@ -62,6 +71,13 @@ def _normalised_2d(ev: Evidence) -> np.ndarray:
     return (ev.uv - hip[:, None]) / max(scale, 1e-6)
 
 
+def _hip_centred_3d(ev: Evidence) -> np.ndarray:
+    """(T, 33, 3) MediaPipe's 3d landmarks relative to the middle of its hips, metres."""
+    hip = 0.5 * (ev.world_ray[:, LANDMARK_INDEX["left_hip"]]
+                 + ev.world_ray[:, LANDMARK_INDEX["right_hip"]])
+    return ev.world_ray - hip[:, None]
+
+
 def _motion_sigma(fps: float, fps_ref: float) -> tuple[float, float]:
     """The motion scale between consecutive frames (torso lengths) and its lift by the noise
     floor over the scale of motion alone (1 up to 50 fps)."""
@@ -72,13 +88,21 @@ def _motion_sigma(fps: float, fps_ref: float) -> tuple[float, float]:
 
 def _motion_costs(ev: Evidence, parts: tuple[str, ...], fps_ref: float) -> np.ndarray:
     """(T, 2, 2) cost of the move from the previous frame with evidence (state i, 1 =
-    exchanged) to this frame (state j); zero where either frame has no evidence."""
+    exchanged) to this frame (state j), in the image and in 3d; zero where either frame has no
+    evidence."""
+    sigma, _ = _motion_sigma(ev.fps, fps_ref)
+    sigma_3d = sigma * MOTION_SIGMA_3D / MOTION_SIGMA
+    return (_moves(_normalised_2d(ev), ev, parts, sigma)
+            + _moves(_hip_centred_3d(ev), ev, parts, sigma_3d))
+
+
+def _moves(x: np.ndarray, ev: Evidence, parts: tuple[str, ...], sigma: float) -> np.ndarray:
+    """(T, 2, 2) the saturated squared motion of `parts`' landmarks `x` (T, 33, D) between
+    frames with evidence, per motion scale `sigma` per frame, under both labellings."""
     left, right = _pairs(parts)
-    x = _normalised_2d(ev)
     states = (np.concatenate([x[:, left], x[:, right]], axis=1),     # labels as given
               np.concatenate([x[:, right], x[:, left]], axis=1))     # labels exchanged
     w = np.concatenate([ev.weight[:, left], ev.weight[:, right]], axis=1)
-    sigma, _ = _motion_sigma(ev.fps, fps_ref)
     cost = np.zeros((len(x), 2, 2))
     good = np.flatnonzero(ev.valid)
     for last, t in zip(good[:-1], good[1:]):
@@ -151,12 +175,23 @@ def swap_paths(ev: Evidence, groups: tuple[str, ...] = tuple(GROUPS), fps_ref: f
     for t in range(t_count - 1, 0, -1):
         path[t - 1] = back[t, path[t]]
     swapped = bits[path].astype(bool)                                     # (T, G)
-    # Exchanging every group in every frame costs the same (a mirror image): keep the path
-    # under which the trunk keeps more of its detected labels (without a trunk group, there
-    # are no attachment costs, and each group is decided alone).
+    # Exchanging every group in every frame of a stretch of consecutive detections costs about
+    # the same (a mirror image): in each stretch keep the labelling under which the trunk keeps
+    # more of its detected labels (without a trunk group, there are no attachment costs, and
+    # each group is decided alone).
     judge = [groups.index("trunk")] * len(groups) if "trunk" in groups else range(len(groups))
-    return {name: (swapped[:, g] ^ (swapped[ev.valid, j].mean() > 0.5)) & ev.valid
-            for g, (name, j) in enumerate(zip(groups, judge))}
+    for stretch in _stretches(ev.valid, max(1, round(STRETCH_GAP * ev.fps))):
+        mirrored = swapped[stretch].mean(axis=0) > 0.5                    # (G,)
+        swapped[stretch] ^= mirrored[list(judge)]
+    return {name: swapped[:, g] & ev.valid for g, name in enumerate(groups)}
+
+
+def _stretches(valid: np.ndarray, min_gap: int) -> list[np.ndarray]:
+    """The frame indices of each run of valid frames, runs split where at least `min_gap`
+    frames in a row are not valid."""
+    frames = np.flatnonzero(valid)
+    return [run for run in np.split(frames, np.flatnonzero(np.diff(frames) > min_gap) + 1)
+            if run.size]
 
 
 def _exchange(values: np.ndarray, rows: np.ndarray, left: np.ndarray, right: np.ndarray
