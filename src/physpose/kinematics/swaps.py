@@ -25,7 +25,8 @@ The labelling of a stretch of detections as a whole (all groups exchanged in eac
 is a mirror image with about the same cost where nothing but a gap's weak motion term links it to
 the rest (STRETCH_GAP or longer); in each such stretch the one keeping the trunk's detected
 labels in more frames wins (a person seen again after a gap may be labelled either way by the
-path). Swapped
+path). The price: a whole-body flip of the detector that lasts all or most of such a stretch is
+taken as the detector's labels and not repaired. Swapped
 frames exchange the left and right landmarks (2d, 3d and confidences).
 """
 
@@ -33,6 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 
 import numpy as np
 
@@ -180,7 +182,7 @@ def swap_paths(ev: Evidence, groups: tuple[str, ...] = tuple(GROUPS), fps_ref: f
     # more of its detected labels (without a trunk group, there are no attachment costs, and
     # each group is decided alone).
     judge = [groups.index("trunk")] * len(groups) if "trunk" in groups else range(len(groups))
-    for stretch in _stretches(ev.valid, max(1, round(STRETCH_GAP * ev.fps))):
+    for stretch in _stretches(ev.valid, max(1, math.ceil(STRETCH_GAP * ev.fps - 1e-9))):
         mirrored = swapped[stretch].mean(axis=0) > 0.5                    # (G,)
         swapped[stretch] ^= mirrored[list(judge)]
     return {name: swapped[:, g] & ev.valid for g, name in enumerate(groups)}
