@@ -48,7 +48,7 @@ from physpose.observations import Observations
 from physpose.shape import BodyShape
 from physpose.skeleton import NQ
 
-KINEMATICS_VERSION = 8  # bump when a change alters the result for the same input and config
+KINEMATICS_VERSION = 9  # bump when a change alters the result for the same input and config
 Log = Callable[[str], None]
 
 

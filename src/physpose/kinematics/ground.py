@@ -6,8 +6,10 @@ D the signed distances of surface points to the plane and L_k the k smallest. It
 body in contact with the ground without preferring particular contact points and ignores
 frames in the air. Where the contacts alone leave the plane's tilt open (a person standing on
 one spot), two priors decide: balance (averaged over the clip, the body's centre of mass lies
-above its support, the centroid of the lowest surface points) and a weak one that the camera's
-roll about its optical axis is small. The plane is searched from several starts (the level
+above its support, the centroid of the lowest surface points; only frames whose centre of
+mass rises at least BALANCE_LOW above the lowest point count, fully from BALANCE_LEVER: lying
+or sitting on the floor, the direction says nothing about which way is up) and a weak one
+that the camera's roll about its optical axis is small. The plane is searched from several starts (the level
 camera's up, the mean balance direction, the normal of the lowest foot points) and the best
 minimum wins.
 
@@ -56,17 +58,19 @@ def _normal(tilt, n0, e1, e2):
 
 
 _SUPPORT_BAND = 0.03  # m: surface points this close to the lowest one form the support
+BALANCE_LEVER = 0.6   # m: a centre of mass this high above the lowest point counts fully
+BALANCE_LOW = 0.25    # m: ... and one this low (lying, sitting on the floor) not at all
 _MAX_ROUNDS = 3       # restarts of the plane fit from its own result
 
 
-def _plane_loss(p: PlaneParams, n0, e1, e2, points, weight, left, right, balance, depth_u,
-                roll_sigma, balance_sigma, gain_sigma, *, k, delta, body_weight):
+def _plane_loss(p: PlaneParams, n0, e1, e2, points, weight, left, right, balance, lever,
+                depth_u, roll_sigma, balance_sigma, gain_sigma, *, k, delta, body_weight):
     n = _normal(p.tilt, n0, e1, e2)
     dist = jnp.exp(p.depth_gain * depth_u)[:, None] * (points @ n) + p.offset   # (T, P)
     per = (ground_term(dist[:, left], k, delta) + ground_term(dist[:, right], k, delta)
            + body_weight * ground_term(dist, k, delta)) / _GP_SCALE
     roll = jnp.arctan2(n[0], -n[1])
-    lean = 2.0 * (1.0 - balance @ n) / balance_sigma ** 2
+    lean = 2.0 * lever * (1.0 - balance @ n) / balance_sigma ** 2
     return (jnp.sum(weight * (per + lean)) / jnp.sum(weight) + (roll / roll_sigma) ** 2
             + (p.depth_gain / gain_sigma) ** 2)
 
@@ -75,14 +79,21 @@ _plane_value_and_grad = jax.jit(jax.value_and_grad(_plane_loss),
                                 static_argnames=("k", "delta", "body_weight"))
 
 
-def balance_directions(points: np.ndarray, com: np.ndarray, up: np.ndarray) -> np.ndarray:
+def balance_directions(points: np.ndarray, com: np.ndarray, up: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors (T, 3) from each frame's support (centroid of the surface points within
-    _SUPPORT_BAND of the lowest along `up`) to its centre of mass."""
+    _SUPPORT_BAND of the lowest along `up`) to its centre of mass, and how much each frame's
+    direction counts (T,): 0 where the centre of mass rises less than BALANCE_LOW above the
+    lowest point along `up`, rising as a square to 1 at BALANCE_LEVER. A body lying on the
+    floor has its centre of mass a hand's breadth above a support spread under it, and the
+    short vector's direction says nothing about which way is up."""
     heights = points @ up
     near = heights <= heights.min(axis=1, keepdims=True) + _SUPPORT_BAND
     support = (points * near[..., None]).sum(1) / near.sum(1, keepdims=True)
     b = com - support
-    return b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-9)
+    rise = np.maximum(com @ up - heights.min(axis=1), 0.0)
+    return (b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-9),
+            np.clip((rise - BALANCE_LOW) / (BALANCE_LEVER - BALANCE_LOW), 0.0, 1.0) ** 2)
 
 
 def _lowest_foot_normal(points: np.ndarray, feet: np.ndarray, fallback: np.ndarray) -> np.ndarray:
@@ -108,8 +119,8 @@ def estimate_plane(points: np.ndarray, left: np.ndarray, right: np.ndarray, com:
     """
     points = np.asarray(points, dtype=float)
     feet = np.flatnonzero(left | right)
-    balance = balance_directions(points, com, UP_LEVEL)
-    mean = balance.mean(axis=0)
+    balance, lever = balance_directions(points, com, UP_LEVEL)
+    mean = (lever[:, None] * balance).sum(axis=0) if lever.sum() > 0 else balance.mean(axis=0)
     starts = [UP_LEVEL, mean / np.linalg.norm(mean)]
     starts.append(_lowest_foot_normal(points, feet, starts[1]))
     best = min((_descend(points, left, right, com, n0, cfg) for n0 in starts),
@@ -138,6 +149,7 @@ def _descend(points, left, right, com, n0, cfg: GroundConfig) -> tuple[float, np
 
 
 def _fit_plane(points, left, right, balance, n0, cfg: GroundConfig):
+    balance, lever = balance
     e1, e2 = _basis(n0)
     feet = np.flatnonzero(left | right)
     d0 = -float(np.percentile(np.min(points[:, feet] @ n0, axis=1), 10.0))
@@ -146,7 +158,7 @@ def _fit_plane(points, left, right, balance, n0, cfg: GroundConfig):
     weight[:len(points)] = 1.0
     args = tuple(jnp.asarray(a) for a in (  # on the device once, not at every evaluation
         n0, e1, e2, pad(points, length), weight, np.flatnonzero(left), np.flatnonzero(right),
-        pad(balance, length), pad(relative_depth(points), length),
+        pad(balance, length), pad(lever, length), pad(relative_depth(points), length),
         np.radians(cfg.roll_sigma_deg), np.radians(cfg.balance_sigma_deg),
         max(cfg.depth_gain_sigma, 1e-6)))
 
