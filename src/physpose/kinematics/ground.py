@@ -6,10 +6,13 @@ D the signed distances of surface points to the plane and L_k the k smallest. It
 body in contact with the ground without preferring particular contact points and ignores
 frames in the air. Where the contacts alone leave the plane's tilt open (a person standing on
 one spot), two priors decide: balance (averaged over the clip, the body's centre of mass lies
-above its support, the centroid of the lowest surface points; only frames whose centre of
-mass rises at least BALANCE_LOW above the lowest point count, fully from BALANCE_LEVER: lying
-or sitting on the floor, the direction says nothing about which way is up) and a weak one
-that the camera's roll about its optical axis is small. The plane is searched from several starts (the level
+above its support, the centroid of the lowest surface points; a frame counts as far as its
+centre of mass rises above the lowest point, not at all under _BALANCE_MIN_RISE and fully from
+_BALANCE_FULL_RISE: lying or sitting on the floor, the direction says nothing about which way
+is up, and crouching or bending frames count less too) and a weak one that the camera's roll
+about its optical axis is small. The balance term is averaged over all frames, so a clip with
+many low frames has a weaker prior. The rise is measured along the candidate normal, so the
+weights change as the search moves. The plane is searched from several starts (the level
 camera's up, the mean balance direction, the normal of the lowest foot points) and the best
 minimum wins.
 
@@ -58,8 +61,8 @@ def _normal(tilt, n0, e1, e2):
 
 
 _SUPPORT_BAND = 0.03  # m: surface points this close to the lowest one form the support
-BALANCE_LEVER = 0.6   # m: a centre of mass this high above the lowest point counts fully
-BALANCE_LOW = 0.25    # m: ... and one this low (lying, sitting on the floor) not at all
+_BALANCE_FULL_RISE = 0.6  # m: a centre of mass this high above the lowest point counts fully
+_BALANCE_MIN_RISE = 0.25  # m: ... and one this low (lying, sitting on the floor) not at all
 _MAX_ROUNDS = 3       # restarts of the plane fit from its own result
 
 
@@ -83,17 +86,18 @@ def balance_directions(points: np.ndarray, com: np.ndarray, up: np.ndarray
                        ) -> tuple[np.ndarray, np.ndarray]:
     """Unit vectors (T, 3) from each frame's support (centroid of the surface points within
     _SUPPORT_BAND of the lowest along `up`) to its centre of mass, and how much each frame's
-    direction counts (T,): 0 where the centre of mass rises less than BALANCE_LOW above the
-    lowest point along `up`, rising as a square to 1 at BALANCE_LEVER. A body lying on the
-    floor has its centre of mass a hand's breadth above a support spread under it, and the
-    short vector's direction says nothing about which way is up."""
+    direction counts (T,): 0 where the centre of mass rises less than _BALANCE_MIN_RISE above
+    the lowest point along `up`, rising as a square to 1 at _BALANCE_FULL_RISE. A body lying
+    on the floor has its centre of mass a few tenths of a metre above a support of a few
+    points under it, and the direction between them says nothing about which way is up."""
     heights = points @ up
     near = heights <= heights.min(axis=1, keepdims=True) + _SUPPORT_BAND
     support = (points * near[..., None]).sum(1) / near.sum(1, keepdims=True)
     b = com - support
     rise = np.maximum(com @ up - heights.min(axis=1), 0.0)
     return (b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-9),
-            np.clip((rise - BALANCE_LOW) / (BALANCE_LEVER - BALANCE_LOW), 0.0, 1.0) ** 2)
+            np.clip((rise - _BALANCE_MIN_RISE) / (_BALANCE_FULL_RISE - _BALANCE_MIN_RISE),
+                    0.0, 1.0) ** 2)
 
 
 def _lowest_foot_normal(points: np.ndarray, feet: np.ndarray, fallback: np.ndarray) -> np.ndarray:
@@ -141,15 +145,15 @@ def _descend(points, left, right, com, n0, cfg: GroundConfig) -> tuple[float, np
     selection: restart from each result while it improves."""
     best, n = (np.inf, n0, 0.0), n0
     for _ in range(_MAX_ROUNDS):
-        v, n_new, d = _fit_plane(points, left, right, balance_directions(points, com, n), n, cfg)
+        balance, lever = balance_directions(points, com, n)
+        v, n_new, d = _fit_plane(points, left, right, balance, lever, n, cfg)
         if v > best[0] - 1e-6:
             break
         best, n = (v, n_new, d), n_new
     return best
 
 
-def _fit_plane(points, left, right, balance, n0, cfg: GroundConfig):
-    balance, lever = balance
+def _fit_plane(points, left, right, balance, lever, n0, cfg: GroundConfig):
     e1, e2 = _basis(n0)
     feet = np.flatnonzero(left | right)
     d0 = -float(np.percentile(np.min(points[:, feet] @ n0, axis=1), 10.0))
