@@ -103,12 +103,12 @@ def test_plane_tolerates_monocular_depth_errors(depth_slope):
 
 @pytest.mark.parametrize("lying, standing, heading_deg", [(25, 15, 60.0), (10, 30, 30.0)])
 def test_frames_lying_on_the_floor_do_not_tilt_the_plane(lying, standing, heading_deg):
-    """A person lies face down on the floor, then stands. Lying, the centre of mass is a hand's
-    breadth above a support spread under the body, and the direction between them says
+    """A person lies face down on the floor, then stands. Lying, the centre of mass is a few
+    tenths of a metre above a support of a few points, and the direction between them says
     nothing about which way is up; counted in the balance prior as a standing frame's is, it
     tilted the plane by 63 and 17 degrees in these two clips (a person getting up from the
-    floor was placed 1.4 m off). Frames whose centre of mass rises less than 0.25 m above the
-    lowest point now do not count there."""
+    floor was placed 1.4 m off). Frames now count by how far the centre of mass rises above
+    the lowest point: not under 0.25 m, little just above it."""
     shape = BodyShape.from_height(1.7)
     q = walking_qpos(shape, lying + standing, heading_deg=heading_deg, speed=0.0)
     face_down = Rotation.from_euler("x", -90.0, degrees=True)
