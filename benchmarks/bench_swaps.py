@@ -23,11 +23,11 @@ import numpy as np
 
 from physpose.benchmark.material import crop_mocap
 from physpose.detector_sim import DetectorSimConfig, simulate_detections
+from physpose.joints import LANDMARK_INDEX
 from physpose.kinematics import camera as cam
 from physpose.kinematics.config import KinematicConfig
 from physpose.kinematics.evidence import gather_evidence
 from physpose.kinematics.swaps import GROUPS, swap_paths
-from physpose.joints import LANDMARK_INDEX
 from physpose.mocap import load_mocap
 from physpose.paths import shared_data_dir
 

@@ -26,8 +26,8 @@ is a mirror image with about the same cost where nothing but a gap's weak motion
 the rest (STRETCH_GAP or longer); in each such stretch the one keeping the trunk's detected
 labels in more frames wins (a person seen again after a gap may be labelled either way by the
 path). The price: a whole-body flip of the detector that lasts all or most of such a stretch is
-taken as the detector's labels and not repaired. Swapped
-frames exchange the left and right landmarks (2d, 3d and confidences).
+taken as the detector's labels and not repaired. Swapped frames exchange the left and right
+landmarks (2d, 3d and confidences).
 """
 
 from __future__ import annotations
@@ -177,10 +177,10 @@ def swap_paths(ev: Evidence, groups: tuple[str, ...] = tuple(GROUPS), fps_ref: f
     for t in range(t_count - 1, 0, -1):
         path[t - 1] = back[t, path[t]]
     swapped = bits[path].astype(bool)                                     # (T, G)
-    # Exchanging every group in every frame of a stretch of consecutive detections costs about
-    # the same (a mirror image): in each stretch keep the labelling under which the trunk keeps
-    # more of its detected labels (without a trunk group, there are no attachment costs, and
-    # each group is decided alone).
+    # Exchanging every group in every frame of a stretch between gaps of STRETCH_GAP or more
+    # costs about the same (a mirror image): in each stretch keep the labelling under which the
+    # trunk keeps more of its detected labels (without a trunk group, there are no attachment
+    # costs, and each group is decided alone).
     judge = [groups.index("trunk")] * len(groups) if "trunk" in groups else range(len(groups))
     for stretch in _stretches(ev.valid, max(1, math.ceil(STRETCH_GAP * ev.fps - 1e-9))):
         mirrored = swapped[stretch].mean(axis=0) > 0.5                    # (G,)
