@@ -28,7 +28,7 @@ from physpose.kinematics import camera as cam
 from physpose.kinematics.config import KinematicConfig
 from physpose.kinematics.evidence import gather_evidence
 from physpose.kinematics.swaps import GROUPS, swap_paths
-from physpose.mocap import load_mocap
+from physpose.mocap import MocapClip, load_mocap
 from physpose.paths import shared_data_dir
 
 _SHARED = ("cmu_amc/*.amc", "cmu_bvh/*.bvh", "deepmimic/humanoid3d_*.txt")
@@ -43,8 +43,8 @@ def _clips(given: list[Path]) -> list[Path]:
     return sorted(p for pattern in _SHARED for p in root.glob(pattern))
 
 
-def _run(path: Path, seed: int, azimuth: float, cfg: KinematicConfig) -> dict[str, dict]:
-    motion = crop_mocap(load_mocap(path, target_fps=25.0), 4.0)
+def _run(motion: MocapClip, seed: int, azimuth: float, cfg: KinematicConfig
+         ) -> dict[str, dict]:
     capture = simulate_detections(motion, DetectorSimConfig(seed=seed, azimuth_deg=azimuth))
     obs = capture.observations
     K = cam.intrinsics(obs.image_size, cam.focal_from_fov(obs.image_size,
@@ -75,7 +75,8 @@ def main() -> None:
     cfg = KinematicConfig.preset("SO+GT")
     rows = []
     for path in clips:
-        runs = [_run(path, seed, az, cfg) for seed in range(args.seeds) for az in azimuths]
+        motion = crop_mocap(load_mocap(path, target_fps=25.0), 4.0)   # once per clip
+        runs = [_run(motion, seed, az, cfg) for seed in range(args.seeds) for az in azimuths]
         legs = np.array([r["legs"]["repaired"] for r in runs])
         row = {"clip": path.stem, "runs": len(runs),
                "legs_failed_runs": int((legs > FAIL_SHARE).sum())}
