@@ -82,11 +82,12 @@ def walking_qpos(shape: BodyShape, frames: int, fps: float = 25.0, speed: float 
 def synthetic_clip(frames: int = 12, *, noise_px: float = 0.0, noise_3d: float = 0.0,
                    seed: int = 0, shape: BodyShape | None = None,
                    T_world2cam: np.ndarray | None = None, with_K: bool = True,
-                   fps: float = 25.0,
+                   fps: float = 25.0, depth_scale: float = 1.0,
                    edit_qpos: Callable[[np.ndarray], np.ndarray] | None = None) -> SyntheticClip:
     """A walking body seen by a static camera, as Observations (world landmarks in the ray
-    frame of the hips, like MediaPipe's, with the default fit configuration). edit_qpos
-    changes the walk's (T, 55) qpos before it is seen (e.g. to raise the arms)."""
+    frame of the hips, like MediaPipe's, with the default fit configuration; their depth along
+    the ray x depth_scale). edit_qpos changes the walk's (T, 55) qpos before it is seen (e.g.
+    to raise the arms)."""
     rng = np.random.default_rng(seed)
     shape = shape or BodyShape.from_height(1.75)
     q = walking_qpos(shape, frames, fps)
@@ -102,7 +103,7 @@ def synthetic_clip(frames: int = 12, *, noise_px: float = 0.0, noise_3d: float =
                                                                               + (2,))
     hips = lm_cam[:, _HIPS].mean(axis=1)
     R_ray = rotation_to(np.array([0.0, 0.0, 1.0]), rays(K, uv[:, _HIPS].mean(axis=1)))
-    world = np.einsum("tji,tpj->tpi", R_ray, lm_cam - hips[:, None])
+    world = np.einsum("tji,tpj->tpi", R_ray, lm_cam - hips[:, None]) * [1.0, 1.0, depth_scale]
     world = world + noise_3d * rng.standard_normal(world.shape)
     kp = np.concatenate([uv, np.ones(uv.shape[:2] + (1,))], axis=-1)
     obs = Observations(source="synthetic", fps=fps, image_size=IMAGE_SIZE,

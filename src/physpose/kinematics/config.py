@@ -75,7 +75,12 @@ class PoseConfig:
     robust_c: float = 5.0              # Geman-McClure: residuals beyond ~c sigma saturate
     min_confidence: float = 0.1        # landmarks below this confidence are ignored
     ray_aligned_world: bool = True     # MediaPipe's world landmarks face the ray to the hips
-    depth_scale_log_sigma: float = 0.3  # prior of the per-clip depth scale of MediaPipe's 3d
+    # MediaPipe's depth x this = the body's, per clip, a log-normal prior. Real MediaPipe's
+    # depth is flatter than the body's (x 0.61) yet predicts it best unscaled (x 1.04,
+    # correlation 0.80; docs/mediapipe_error.md): a prior centred at 1 / 0.61 made the fit
+    # worse on the pose2sim views (docs/dynamics_history.md, stop 66).
+    depth_scale_prior_mean: float = 1.0
+    depth_scale_log_sigma: float = 0.3
     sigma_velocity: float = 2.0        # m/s, +T landmark velocity scale
     sigma_acceleration: float = 60.0   # m/s^2, +T landmark acceleration scale
     sigma_angle_acceleration: float = 100.0  # rad/s^2, +T hinge acceleration scale

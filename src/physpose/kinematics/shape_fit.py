@@ -42,12 +42,13 @@ def fit_shape(ev: Evidence, K: np.ndarray, cfg: KinematicConfig, settings: Setti
     bones = np.array([lengths[n] for n in BONE_NAMES])
     if height is not None:
         bones = bones * height / stature_from_bones(bones)
-    root_pos, R0, angles = initial_pose(ev, seeds, bones, K, 1.0, 1.0)
+    depth_scale = cfg.pose.depth_scale_prior_mean  # the fit starts at its prior's centre
+    root_pos, R0, angles = initial_pose(ev, seeds, bones, K, depth_scale, 1.0)
     length = padded_length(len(seeds))
     problem = make_problem(ev, seeds, length, R0, K, K[0, 0], root_pos[:, 2], surface_offset,
                            height, settings, np.zeros(4), cfg.pose.hard_limits)
-    params = make_params(root_pos, np.zeros_like(root_pos), angles, bones, 1.0, 1.0, K[0, 0],
-                         length)
+    params = make_params(root_pos, np.zeros_like(root_pos), angles, bones, depth_scale, 1.0,
+                         K[0, 0], length)
     w = cfg.pose.weights
     pose_terms = dict(reprojection=w.reprojection, world_landmarks=w.world_landmarks,
                       pose_prior=w.pose_prior, joint_limits=w.joint_limits)
