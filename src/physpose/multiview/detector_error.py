@@ -68,6 +68,9 @@ class ViewError:
     bias3d_axes_mm: tuple[float, float, float]
     scale_ratio: float            # size of MediaPipe's body / the reference's
     depth_scale_ratio: float      # MediaPipe hip-relative depth / reference's (LS fit)
+    depth_predictor: float        # the factor on MediaPipe's depth best predicting the
+                                  # reference's (LS fit the other way round)
+    depth_correlation: float      # of the two hip-relative depths
     swap_rate_legs: float         # fraction of frames with the legs' left/right exchanged
     swap_rate_arms: float
 
@@ -116,6 +119,7 @@ def view_error(ref: MultiviewReference, view: int) -> ViewError:
     d3 = (mp - ref_cam) * 1000
     mp_joints, ref_joints = joints_from_landmarks(mp), joints_from_landmarks(ref_cam)
     size = lambda x: np.sqrt((x ** 2).sum(-1).mean(-1))  # noqa: E731  per-frame RMS radius
+    cross = (mp[..., 2] * ref_cam[..., 2]).sum()
     height = obs.image_size[1]
     return ViewError(
         view=cam.name, frames=int(ok.sum()), person_height_px=float(np.median(extent)),
@@ -133,8 +137,10 @@ def view_error(ref: MultiviewReference, view: int) -> ViewError:
         rms3d_axes_mm=tuple(float(v) for v in np.sqrt((d3 ** 2).mean(axis=(0, 1)))),
         bias3d_axes_mm=tuple(float(v) for v in d3.mean(axis=(0, 1))),
         scale_ratio=float(np.median(size(mp) / size(ref_cam))),
-        depth_scale_ratio=float((mp[..., 2] * ref_cam[..., 2]).sum()
-                                / (ref_cam[..., 2] ** 2).sum()),
+        depth_scale_ratio=float(cross / (ref_cam[..., 2] ** 2).sum()),
+        depth_predictor=float(cross / (mp[..., 2] ** 2).sum()),
+        depth_correlation=float(cross / np.sqrt((mp[..., 2] ** 2).sum()
+                                                * (ref_cam[..., 2] ** 2).sum())),
         swap_rate_legs=_swap_rate(kp, ref2d, _SWAP_PARTS["legs"]),
         swap_rate_arms=_swap_rate(kp, ref2d, _SWAP_PARTS["arms"]))
 
@@ -166,7 +172,7 @@ def render_markdown(ref: MultiviewReference, errors: list[ViewError], command: s
     rows3d = [(e.view, e.err3d_joints_mm, e.err3d_joints_pa_mm, e.err3d_mean_mm, e.err3d_median_mm,
                " / ".join(f"{v:.0f}" for v in e.rms3d_axes_mm),
                " / ".join(f"{v:+.0f}" for v in e.bias3d_axes_mm), e.scale_ratio,
-               e.depth_scale_ratio) for e in errors]
+               e.depth_scale_ratio, e.depth_predictor, e.depth_correlation) for e in errors]
     fmt = lambda row: "| " + " | ".join(  # noqa: E731
         f"{v:.2f}" if isinstance(v, float) and abs(v) < 2 else
         f"{v:.1f}" if isinstance(v, float) else str(v) for v in row) + " |"
@@ -210,11 +216,15 @@ def render_markdown(ref: MultiviewReference, errors: list[ViewError], command: s
         "MPJPE and MPJPE-PA on the project's 21 joints as `physpose.metrics` computes them; "
         "the other columns on the 33 landmarks (hands and face included). Scale: RMS radius "
         "of MediaPipe's body over the reference's; depth scale: least-squares factor from the "
-        "reference's hip-relative camera-z to MediaPipe's.", "",
+        "reference's hip-relative camera-z to MediaPipe's; depth predictor: the same the other "
+        "way round, the factor on MediaPipe's depth that best predicts the reference's; "
+        "depth corr: the correlation of the two.", "",
         "| view | MPJPE (21 joints) | MPJPE-PA | 33 landmarks mean | median | RMS x / y / z | "
-        "bias x / y / z | scale | depth scale |", "|" + "---|" * 9, *[fmt(r) for r in rows3d],
+        "bias x / y / z | scale | depth scale | depth predictor | depth corr |",
+        "|" + "---|" * 11, *[fmt(r) for r in rows3d],
         fmt(("all", p["err3d_joints_mm"], p["err3d_joints_pa_mm"], p["err3d_mean_mm"],
-             p["err3d_median_mm"], "", "", p["scale_ratio"], p["depth_scale_ratio"])), "",
+             p["err3d_median_mm"], "", "", p["scale_ratio"], p["depth_scale_ratio"],
+             p["depth_predictor"], p["depth_correlation"])), "",
     ]
     return "\n".join(lines)
 
