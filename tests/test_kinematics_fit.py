@@ -12,7 +12,7 @@ from test_kinematics_fixtures import synthetic_clip
 from physpose.errors import PhysposeError
 from physpose.fk import fk_qpos
 from physpose.kinematics import KinematicConfig, fit_kinematics
-from physpose.kinematics.config import VARIANT_NAMES, GroundConfig
+from physpose.kinematics.config import VARIANT_NAMES, GroundConfig, PoseConfig
 from physpose.kinematics.fit import fit_variants
 from physpose.joints import LANDMARK_INDEX
 from physpose.metrics import foot_points, transform_points
@@ -46,16 +46,26 @@ def test_the_depth_scale_prior_is_centred_where_configured():
     """A detector whose depth along the ray is 0.61 x the body's: a prior centred at 1 / 0.61
     recovers the body as if the depth were right, the default prior (centred at 1) less well."""
     clip = synthetic_clip(frames=10, depth_scale=0.61)
-    errors = []
+    errors, factors = [], []
     for centre in (1.0, 1.0 / 0.61):
         cfg = KinematicConfig.preset("SO", use_cache=False)
         cfg = dataclasses.replace(cfg, pose=dataclasses.replace(
-            cfg.pose, depth_scale_prior_mean=centre))
+            cfg.pose, depth_scale_prior_centre=centre))
         fit = fit_kinematics(clip.observations, cfg, height=clip.shape.height)
         errors.append(np.linalg.norm(_camera_landmarks(fit) - clip.landmarks_cam, axis=-1))
+        factors.append(fit.losses["depth_scale"])
     default, centred = errors
     assert centred.mean() < 0.01 and np.percentile(centred, 95) < 0.02, centred.mean()
     assert centred.mean() < 0.7 * default.mean(), (centred.mean(), default.mean())
+    assert abs(factors[1] * 0.61 - 1.0) < 0.05, factors  # the fit undid the compression
+
+
+@pytest.mark.parametrize("bad", [dict(depth_scale_prior_centre=0.0),
+                                 dict(depth_scale_prior_centre=5.0),
+                                 dict(depth_scale_log_sigma=0.0)])
+def test_bad_depth_scale_priors_are_refused(bad):
+    with pytest.raises(PhysposeError, match="depth_scale"):
+        PoseConfig(**bad)
 
 
 def _raise_arms(qpos: np.ndarray) -> np.ndarray:

@@ -75,11 +75,11 @@ class PoseConfig:
     robust_c: float = 5.0              # Geman-McClure: residuals beyond ~c sigma saturate
     min_confidence: float = 0.1        # landmarks below this confidence are ignored
     ray_aligned_world: bool = True     # MediaPipe's world landmarks face the ray to the hips
-    # MediaPipe's depth x this = the body's, per clip, a log-normal prior. Real MediaPipe's
-    # depth is flatter than the body's (x 0.61) yet predicts it best unscaled (x 1.04,
-    # correlation 0.80; docs/mediapipe_error.md): a prior centred at 1 / 0.61 made the fit
-    # worse on the pose2sim views (docs/dynamics_history.md, stop 66).
-    depth_scale_prior_mean: float = 1.0
+    # MediaPipe's depth x this = the body's, per clip: a log-normal prior (its median, then the
+    # log's sigma). Real MediaPipe's depth is flatter than the body's but predicts it best
+    # unscaled (docs/mediapipe_error.md); a centre at 1 / 0.61 did not help on real views
+    # (docs/dynamics_history.md, stop 66).
+    depth_scale_prior_centre: float = 1.0
     depth_scale_log_sigma: float = 0.3
     sigma_velocity: float = 2.0        # m/s, +T landmark velocity scale
     sigma_acceleration: float = 60.0   # m/s^2, +T landmark acceleration scale
@@ -87,6 +87,15 @@ class PoseConfig:
     iterations: int = 200              # L-BFGS iterations per pose stage
     init_iterations: int = 100         # ... of the 3d-only inverse kinematics (variant S)
     hard_limits: bool = True           # joint limits as L-BFGS-B bounds
+
+    def __post_init__(self) -> None:
+        if not 0.3 <= self.depth_scale_prior_centre <= 2.0:  # the fit's bounds on the factor
+            raise PhysposeError(
+                f"depth_scale_prior_centre={self.depth_scale_prior_centre} is outside 0.3-2.0",
+                remedy="centre MediaPipe's depth factor between 0.3 and 2.0 (default 1)")
+        if not self.depth_scale_log_sigma > 0:
+            raise PhysposeError(f"depth_scale_log_sigma={self.depth_scale_log_sigma} must be > 0",
+                                remedy="pass a positive sigma (default 0.3)")
 
 
 @dataclass(frozen=True)

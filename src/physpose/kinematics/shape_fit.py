@@ -42,7 +42,7 @@ def fit_shape(ev: Evidence, K: np.ndarray, cfg: KinematicConfig, settings: Setti
     bones = np.array([lengths[n] for n in BONE_NAMES])
     if height is not None:
         bones = bones * height / stature_from_bones(bones)
-    depth_scale = cfg.pose.depth_scale_prior_mean  # the fit starts at its prior's centre
+    depth_scale = cfg.pose.depth_scale_prior_centre  # the fit starts at its prior's centre
     root_pos, R0, angles = initial_pose(ev, seeds, bones, K, depth_scale, 1.0)
     length = padded_length(len(seeds))
     problem = make_problem(ev, seeds, length, R0, K, K[0, 0], root_pos[:, 2], surface_offset,

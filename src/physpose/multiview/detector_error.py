@@ -10,7 +10,8 @@ reported beside it. Figures (all over detected frames, the 33 landmarks):
   person's height in the image, to rescale the figures to other framings.
 - 3d: MediaPipe world landmarks (hip-centred, camera axes) against the reference rotated into the
   camera's axes and centred on its hips: mean error, Procrustes-aligned error, per-axis RMS and
-  bias, the overall scale ratio and the depth (camera z) scale ratio.
+  bias, the overall scale ratio, the depth (camera z) scale ratio, the factor on MediaPipe's
+  depth that best predicts the reference's, and the two depths' uncentred correlation.
 - left/right swaps: frames where exchanging a view's left and right legs (or arms) fits the
   reference much better than the labels given.
 
@@ -70,7 +71,7 @@ class ViewError:
     depth_scale_ratio: float      # MediaPipe hip-relative depth / reference's (LS fit)
     depth_predictor: float        # the factor on MediaPipe's depth best predicting the
                                   # reference's (LS fit the other way round)
-    depth_correlation: float      # of the two hip-relative depths
+    depth_correlation: float      # of the two hip-relative depths, uncentred (a cosine)
     swap_rate_legs: float         # fraction of frames with the legs' left/right exchanged
     swap_rate_arms: float
 
@@ -218,7 +219,7 @@ def render_markdown(ref: MultiviewReference, errors: list[ViewError], command: s
         "of MediaPipe's body over the reference's; depth scale: least-squares factor from the "
         "reference's hip-relative camera-z to MediaPipe's; depth predictor: the same the other "
         "way round, the factor on MediaPipe's depth that best predicts the reference's; "
-        "depth corr: the correlation of the two.", "",
+        "depth corr: their uncentred correlation (the cosine between them).", "",
         "| view | MPJPE (21 joints) | MPJPE-PA | 33 landmarks mean | median | RMS x / y / z | "
         "bias x / y / z | scale | depth scale | depth predictor | depth corr |",
         "|" + "---|" * 11, *[fmt(r) for r in rows3d],
