@@ -75,10 +75,10 @@ class PoseConfig:
     robust_c: float = 5.0              # Geman-McClure: residuals beyond ~c sigma saturate
     min_confidence: float = 0.1        # landmarks below this confidence are ignored
     ray_aligned_world: bool = True     # MediaPipe's world landmarks face the ray to the hips
-    # MediaPipe's depth x this = the body's, per clip: a log-normal prior (its median, then the
-    # log's sigma). Real MediaPipe's depth is flatter than the body's but predicts it best
-    # unscaled (docs/mediapipe_error.md); a centre at 1 / 0.61 did not help on real views
-    # (docs/dynamics_history.md, stop 66).
+    # MediaPipe's depth x a per-clip factor = the body's; the factor's log-normal prior has
+    # this median and this sigma of its log. Real MediaPipe's depth is flatter than the body's
+    # but predicts it best unscaled (docs/mediapipe_error.md); a centre at 1 / 0.61 did not
+    # help on real views (docs/dynamics_history.md, stop 66).
     depth_scale_prior_centre: float = 1.0
     depth_scale_log_sigma: float = 0.3
     sigma_velocity: float = 2.0        # m/s, +T landmark velocity scale

@@ -77,7 +77,7 @@ class Settings:
     contact_height: float
     sigma_skate: float
     bone_log_sigma: float
-    depth_log_mean: float
+    depth_log_centre: float
     depth_log_sigma: float
     focal_log_sigma: float
     surface_blocks: tuple[tuple[int, int, int], ...]  # SurfacePoints.blocks
@@ -135,7 +135,7 @@ def terms(params: Params, fixed: Fixed, data: Data, s: Settings) -> dict[str, ja
         "ground_skate": losses.cost_ground_skate(
             pose, data, s.surface(fixed.surface_offset), s.contact_height, s.sigma_skate)
         if s.ground_on else 0.0,
-        "depth_scale_prior": ((params.log_depth_scale - s.depth_log_mean)
+        "depth_scale_prior": ((params.log_depth_scale - s.depth_log_centre)
                               / s.depth_log_sigma) ** 2,
         "bone_prior": jnp.sum(((log_b - log_prop) / s.bone_log_sigma) ** 2),
         "focal_prior": ((params.log_focal - fixed.log_focal_prior) / s.focal_log_sigma) ** 2,

@@ -93,7 +93,7 @@ def settings_from(cfg: PoseConfig, ground, shape_cfg, camera_cfg, surface: Surfa
         ground_scale=ground.pose_scale, contact_height=ground.contact_height,
         sigma_skate=ground.sigma_skate,
         bone_log_sigma=shape_cfg.bone_log_sigma,
-        depth_log_mean=float(np.log(cfg.depth_scale_prior_centre)),
+        depth_log_centre=float(np.log(cfg.depth_scale_prior_centre)),
         depth_log_sigma=cfg.depth_scale_log_sigma,
         focal_log_sigma=camera_cfg.focal_log_sigma, surface_blocks=surface.blocks,
         left_foot=tuple(int(i) for i in np.flatnonzero(surface.left_foot)),
