@@ -201,3 +201,22 @@ def test_detections_left_out_as_torn_are_warned_about_with_their_times():
     assert "and 3 more" in many and "1.00" not in many
     assert diagnostics.warning_lines({"unsure_detections": [0.13]}, 25.0) == [
         diagnostics.unsure_message([0.13])]
+
+
+def test_a_camera_found_at_or_below_the_floor_is_warned_about():
+    """The kinematic fit of a person lying throughout put the camera at -0.37 to +0.03 m above
+    its floor (the truth: 1.3 m; docs/kinematics.md, limits)."""
+    def T(height):  # a camera at `height`, looking along world +y, level
+        R = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+        t = -(R @ np.array([0.0, 0.0, height]))
+        return np.block([[R, t[:, None]], [np.zeros((1, 3)), 1.0]])
+
+    assert diagnostics.camera_height(T(1.3)) == pytest.approx(1.3)
+    assert diagnostics.camera_height(T(-0.37)) == pytest.approx(-0.37)
+    assert diagnostics.low_camera_message(1.3) is None
+    assert diagnostics.low_camera_message(None) is None
+    line = diagnostics.low_camera_message(-0.37)
+    assert "the camera 0.37 m below it" in line and "lying" in line and "stands" in line
+    assert "the camera 0.03 m above it" in diagnostics.low_camera_message(0.03)
+    assert diagnostics.warning_lines({"camera_height": -0.37}, 25.0) == [line]
+    assert diagnostics.warning_lines({"camera_height": 1.3}, 25.0) == []

@@ -21,6 +21,10 @@ somersaults off it, and back), and what the dynamics stage makes of them:
 - `unrecorded_force_runs`: frames whose simulated forces are missing because their windows
   were resumed from checkpoints an earlier physpose wrote without them.
 - `rate_message`: an analysis rate above the rates the kinematic fit was measured at.
+- `camera_height`: where the kinematic fit put the camera above the floor it found. At or
+  below the floor, the person was most likely low to the floor for the whole clip (lying,
+  crawling, kneeling): the plane fit cannot tell the floor from the body's other sides then,
+  and the floor, the placement and the physics are wrong (docs/kinematics.md, limits).
 - `stride_period`: how long the feet take to alternate when the person walks or runs. A
   stride far slower than people walk or run hints at slow-motion footage, which the physics
   must be told of (`--slow-motion`): under real gravity it cannot move as slowly as the person
@@ -37,6 +41,7 @@ from physpose.reconstruction import frame_runs
 from physpose.scene import parse_obstacle
 
 MIN_CONFIDENCE = 0.3       # landmarks that count for the person's image box
+LOW_CAMERA = 0.3           # m: a camera found lower above the floor is warned about
 JUMP_SIZES = 0.4           # a jump: the box centre moves more than this many box diagonals ...
 JUMP_SPEED = 6.0           # ... plus this many box diagonals per second between the detections
 RAISED_HEIGHT = 0.3        # m, lowest sole point above the floor ...
@@ -325,6 +330,24 @@ def seated_message(runs: list[tuple[int, int, float]], seats: tuple, fps: float)
             "with --obstacle box:x,y,z,sx,sy,sz[,yaw_deg] (centre and sizes in world metres)")
 
 
+def camera_height(T_world2cam: np.ndarray) -> float:
+    """Height (m) of the camera centre above the floor z = 0 of a world -> camera transform."""
+    T = np.asarray(T_world2cam, dtype=float)
+    return float(-(T[:3, :3].T @ T[:3, 3])[2])
+
+
+def low_camera_message(height: float | None) -> str | None:
+    """A warning when the kinematic fit put the camera under LOW_CAMERA above its floor."""
+    if height is None or height >= LOW_CAMERA:
+        return None
+    where = f"{height:.2f} m above it" if height >= 0 else f"{-height:.2f} m below it"
+    return (f"kinematics: the floor found puts the camera {where}. The person was probably "
+            "low to the floor for the whole clip (lying, crawling, kneeling), where physpose "
+            "cannot tell the floor from the body's other sides: the floor, the body's placement "
+            "and the physics are then wrong (docs/kinematics.md, Conventions and limits). A "
+            "clip in which the person also stands gives the floor")
+
+
 def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
     """A warning on `invalid_window_runs`, or None."""
     if not runs:
@@ -362,5 +385,6 @@ def warning_lines(found: dict, fps: float, slow_motion: float = 1.0) -> list[str
              invalid_message([tuple(r) for r in found.get("invalid_windows", [])], fps),
              unrecorded_forces_message([tuple(r) for r in found.get("unrecorded_forces", [])],
                                        fps),
-             slow_stride_message(found.get("stride_period"), slow_motion)]
+             slow_stride_message(found.get("stride_period"), slow_motion),
+             low_camera_message(found.get("camera_height"))]
     return [line for line in lines if line]

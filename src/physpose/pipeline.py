@@ -171,6 +171,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
                          **({"log": stderr_log} if progress else {}))
     lap("kinematics")
+    camera_height = diagnostics.camera_height(kin.T_world2cam)
+    _warn(diagnostics.low_camera_message(camera_height))
     raised = diagnostics.raised_runs(kin.joints, kin.fps)
     boxes = supports.support_boxes(kin.joints, raised, kin.fps, kin.support_heights) \
         if config.auto_support else ()
@@ -207,7 +209,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
                              "seats": [b.spec() for b in seats],
                              "invalid_windows": [list(r) for r in invalid],
                              "unrecorded_forces": [list(r) for r in unrecorded],
-                             "stride_period": stride})
+                             "stride_period": stride, "camera_height": camera_height})
     recon = recon.replace(meta=meta)
     recon.save(out_dir / RECONSTRUCTION_FILE)
     resolved = {"stage": "reconstruct", "physpose_version": __version__,

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from physpose.benchmark.material import Clip, Truth
+from physpose.diagnostics import camera_height
 from physpose.joints import joints_from_landmarks
 from physpose.metrics import CONTACT_PRESETS, evaluate, project, transform_points
 from physpose.reconstruction import Reconstruction
@@ -66,11 +67,6 @@ def project_truth(truth: Truth) -> np.ndarray:
     cam = transform_points(truth.T_world2cam, truth.joints)
     uv, _ = cv2.projectPoints(cam.reshape(-1, 3), np.zeros(3), np.zeros(3), truth.K, truth.dist)
     return uv.reshape(cam.shape[:-1] + (2,))
-
-
-def camera_height(T_world2cam: np.ndarray) -> float:
-    """Height (m) of the camera centre above the ground z = 0."""
-    return float(-(T_world2cam[:3, :3].T @ T_world2cam[:3, 3]) @ _UP)
 
 
 def _angle_deg(a: np.ndarray, b: np.ndarray) -> float:
