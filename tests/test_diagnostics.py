@@ -10,6 +10,7 @@ import pytest
 
 from physpose import diagnostics
 from physpose.cli.reconstruct import diagnostics_lines
+from physpose.kinematics.camera import world_from_plane
 
 
 def _walker(frames: int, fps: float, speed_px: float = 300.0, size: float = 400.0) -> np.ndarray:
@@ -203,20 +204,19 @@ def test_detections_left_out_as_torn_are_warned_about_with_their_times():
         diagnostics.unsure_message([0.13])]
 
 
-def test_a_camera_found_at_or_below_the_floor_is_warned_about():
+def test_a_camera_found_low_above_or_below_the_floor_is_warned_about():
     """The kinematic fit of a person lying throughout put the camera at -0.37 to +0.03 m above
-    its floor (the truth: 1.3 m; docs/kinematics.md, limits)."""
-    def T(height):  # a camera at `height`, looking along world +y, level
-        R = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-        t = -(R @ np.array([0.0, 0.0, height]))
-        return np.block([[R, t[:, None]], [np.zeros((1, 3)), 1.0]])
-
-    assert diagnostics.camera_height(T(1.3)) == pytest.approx(1.3)
-    assert diagnostics.camera_height(T(-0.37)) == pytest.approx(-0.37)
+    its floor in the benchmark's runs (the truth: 1.3 m; docs/kinematics.md, limits)."""
+    for offset in (1.3, -0.37, 0.03):  # a pitched, rolled camera, the world origin off-centre
+        n = np.array([0.1, -0.95, -0.3]) / np.linalg.norm([0.1, -0.95, -0.3])
+        T = world_from_plane(n, offset, np.array([0.4, 0.2, 4.0]))
+        assert diagnostics.camera_height(T) == pytest.approx(offset)
     assert diagnostics.low_camera_message(1.3) is None
     assert diagnostics.low_camera_message(None) is None
+    assert diagnostics.low_camera_message(float("nan")) is None
+    assert diagnostics.low_camera_message(diagnostics.LOW_CAMERA) is None
     line = diagnostics.low_camera_message(-0.37)
-    assert "the camera 0.37 m below it" in line and "lying" in line and "stands" in line
-    assert "the camera 0.03 m above it" in diagnostics.low_camera_message(0.03)
+    assert "the camera 0.37 m below it" in line and "lying" in line and "--start/--end" in line
+    assert "the camera 0.29 m above it" in diagnostics.low_camera_message(0.29)
     assert diagnostics.warning_lines({"camera_height": -0.37}, 25.0) == [line]
     assert diagnostics.warning_lines({"camera_height": 1.3}, 25.0) == []

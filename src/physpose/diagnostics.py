@@ -21,10 +21,11 @@ somersaults off it, and back), and what the dynamics stage makes of them:
 - `unrecorded_force_runs`: frames whose simulated forces are missing because their windows
   were resumed from checkpoints an earlier physpose wrote without them.
 - `rate_message`: an analysis rate above the rates the kinematic fit was measured at.
-- `camera_height`: where the kinematic fit put the camera above the floor it found. At or
-  below the floor, the person was most likely low to the floor for the whole clip (lying,
-  crawling, kneeling): the plane fit cannot tell the floor from the body's other sides then,
-  and the floor, the placement and the physics are wrong (docs/kinematics.md, limits).
+- `camera_height`: where the kinematic fit put the camera above the floor it found. Under
+  LOW_CAMERA above it, or below it, the person was most likely low to the floor for the whole
+  clip (lying, crawling, kneeling): the plane fit cannot tell the floor from the body's other
+  sides then, and the floor, the placement and the physics are wrong (docs/kinematics.md,
+  limits).
 - `stride_period`: how long the feet take to alternate when the person walks or runs. A
   stride far slower than people walk or run hints at slow-motion footage, which the physics
   must be told of (`--slow-motion`): under real gravity it cannot move as slowly as the person
@@ -338,14 +339,15 @@ def camera_height(T_world2cam: np.ndarray) -> float:
 
 def low_camera_message(height: float | None) -> str | None:
     """A warning when the kinematic fit put the camera under LOW_CAMERA above its floor."""
-    if height is None or height >= LOW_CAMERA:
+    if height is None or not np.isfinite(height) or height >= LOW_CAMERA:
         return None
     where = f"{height:.2f} m above it" if height >= 0 else f"{-height:.2f} m below it"
-    return (f"kinematics: the floor found puts the camera {where}. The person was probably "
-            "low to the floor for the whole clip (lying, crawling, kneeling), where physpose "
-            "cannot tell the floor from the body's other sides: the floor, the body's placement "
-            "and the physics are then wrong (docs/kinematics.md, Conventions and limits). A "
-            "clip in which the person also stands gives the floor")
+    return (f"kinematics: the floor found puts the camera {where}. Unless the camera really "
+            "stood that low, the person was low to the floor for the whole clip (lying, "
+            "crawling, kneeling), where physpose cannot tell the floor from the body's other "
+            "sides: the floor, the body's placement and the physics are then wrong "
+            "(docs/kinematics.md, Conventions and limits). Analyse a stretch in which the "
+            "person also stands (widen --start/--end)")
 
 
 def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
@@ -378,6 +380,7 @@ def warning_lines(found: dict, fps: float, slow_motion: float = 1.0) -> list[str
              unsure_message(found.get("unsure_detections", [])),
              jumps_message(found.get("person_jumps", []), fps),
              hidden_feet_message(found.get("hidden_feet", 0.0)),
+             low_camera_message(found.get("camera_height")),
              raised_message([tuple(r) for r in found.get("raised", [])], fps,
                             supported=bool(found.get("supports"))),
              seated_message([tuple(r) for r in found.get("seated", [])],
@@ -385,6 +388,5 @@ def warning_lines(found: dict, fps: float, slow_motion: float = 1.0) -> list[str
              invalid_message([tuple(r) for r in found.get("invalid_windows", [])], fps),
              unrecorded_forces_message([tuple(r) for r in found.get("unrecorded_forces", [])],
                                        fps),
-             slow_stride_message(found.get("stride_period"), slow_motion),
-             low_camera_message(found.get("camera_height"))]
+             slow_stride_message(found.get("stride_period"), slow_motion)]
     return [line for line in lines if line]

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from physpose import __version__
-from physpose.diagnostics import rate_message
+from physpose.diagnostics import camera_height, low_camera_message, rate_message
 from physpose.errors import PhysposeError
 from physpose.kinematics.camera import check_intrinsics
 from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
@@ -90,12 +90,17 @@ def _run(args: argparse.Namespace) -> int:
     config = KinematicConfig.preset(args.variant, use_cache=not args.no_cache)
     fit = fit_kinematics(obs, config, height=args.height, mass=args.mass, camera_K=K,
                          log=stderr_log)
+    height_found = camera_height(fit.T_world2cam)
+    low = low_camera_message(height_found)
+    if low:
+        print(f"warning: {low}", file=sys.stderr, flush=True)
     if args.out.exists() and not args.out.is_dir():
         raise PhysposeError("output path exists and is not a folder", path=args.out,
                             remedy="pass a folder for --out")
     args.out.mkdir(parents=True, exist_ok=True)
     recon = reconstruction_of(fit, obs)
-    recon = recon.replace(meta={**recon.meta, "slow_motion": args.slow_motion})
+    recon = recon.replace(meta={**recon.meta, "slow_motion": args.slow_motion,
+                                "diagnostics": {"camera_height": height_found}})
     recon.save(args.out / RECONSTRUCTION_FILE)
     resolved = {"stage": "kinematics", "physpose_version": __version__,
                 "input": str(args.input.resolve()), "variant": args.variant,
