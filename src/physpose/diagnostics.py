@@ -21,7 +21,8 @@ somersaults off it, and back), and what the dynamics stage makes of them:
 - `unrecorded_force_runs`: frames whose simulated forces are missing because their windows
   were resumed from checkpoints an earlier physpose wrote without them.
 - `rate_message`: an analysis rate above the rates the kinematic fit was measured at.
-- `camera_height`: where the kinematic fit put the camera above the floor it found. Under
+- `low_camera_message`: where the kinematic fit put the camera above the floor it found
+  (`metrics.camera_height`). Under
   LOW_CAMERA above it, or below it, the person was most likely low to the floor for the whole
   clip (lying, crawling, kneeling): the plane fit cannot tell the floor from the body's other
   sides then, and the floor, the placement and the physics are wrong (docs/kinematics.md,
@@ -329,12 +330,6 @@ def seated_message(runs: list[tuple[int, int, float]], seats: tuple, fps: float)
     return (f"kinematics: the person sits at frames {where} (thighs level, the trunk behind "
             f"the feet): no body balances so on its feet alone. {what}; give the real seat "
             "with --obstacle box:x,y,z,sx,sy,sz[,yaw_deg] (centre and sizes in world metres)")
-
-
-def camera_height(T_world2cam: np.ndarray) -> float:
-    """Height (m) of the camera centre above the floor z = 0 of a world -> camera transform."""
-    T = np.asarray(T_world2cam, dtype=float)
-    return float(-(T[:3, :3].T @ T[:3, 3])[2])
 
 
 def low_camera_message(height: float | None) -> str | None:

@@ -62,6 +62,12 @@ def transform_points(T_a2b: np.ndarray, points: np.ndarray) -> np.ndarray:
     return points @ T_a2b[:3, :3].T + T_a2b[:3, 3]
 
 
+def camera_height(T_world2cam: np.ndarray) -> float:
+    """Height (m) of the camera centre above the floor z = 0 of a world -> camera transform."""
+    T = np.asarray(T_world2cam, dtype=float)
+    return float(-(T[:3, :3].T @ T[:3, 3])[2])
+
+
 def project(points: np.ndarray, K: np.ndarray, T_world2cam: np.ndarray) -> np.ndarray:
     """Pinhole projection of world points (..., 3) to pixels (..., 2)."""
     cam = transform_points(T_world2cam, points)

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physpose import __version__, diagnostics, supports
+from physpose import __version__, diagnostics, metrics, supports
 from physpose.body import BodyConfig, build_body
 from physpose.cache import atomic_path
 from physpose.dynamics import PRESETS as DYNAMICS_PRESETS
@@ -171,7 +171,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
                          **({"log": stderr_log} if progress else {}))
     lap("kinematics")
-    camera_height = diagnostics.camera_height(kin.T_world2cam)
+    camera_height = metrics.camera_height(kin.T_world2cam)
     _warn(diagnostics.low_camera_message(camera_height))
     raised = diagnostics.raised_runs(kin.joints, kin.fps)
     boxes = supports.support_boxes(kin.joints, raised, kin.fps, kin.support_heights) \

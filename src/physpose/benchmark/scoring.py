@@ -14,9 +14,8 @@ import cv2
 import numpy as np
 
 from physpose.benchmark.material import Clip, Truth
-from physpose.diagnostics import camera_height
 from physpose.joints import joints_from_landmarks
-from physpose.metrics import CONTACT_PRESETS, evaluate, project, transform_points
+from physpose.metrics import CONTACT_PRESETS, camera_height, evaluate, project, transform_points
 from physpose.reconstruction import Reconstruction
 
 TRUTH_ROW = "(ground truth)"  # the row that scores the truth's own plausibility

@@ -13,11 +13,12 @@ from pathlib import Path
 import numpy as np
 
 from physpose import __version__
-from physpose.diagnostics import camera_height, low_camera_message, rate_message
+from physpose.diagnostics import low_camera_message, rate_message
 from physpose.errors import PhysposeError
 from physpose.kinematics.camera import check_intrinsics
 from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
 from physpose.kinematics.fit import fit_kinematics, stderr_log
+from physpose.metrics import camera_height
 from physpose.observations import check_slow_motion
 from physpose.observe import ObserveConfig, footage_observe
 

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from physpose.errors import PhysposeError
+from physpose.metrics import camera_height
 from physpose.pinhole import focal_from_fov, intrinsics  # noqa: F401 (the fit's camera)
 
 UP_LEVEL = np.array([0.0, -1.0, 0.0])  # the up direction of a level camera, camera axes
@@ -80,7 +81,4 @@ def world_from_plane(normal: np.ndarray, offset: float, origin_cam: np.ndarray) 
 
 def plane_from_world(T_world2cam: np.ndarray) -> tuple[np.ndarray, float]:
     """(normal (3,), offset) in camera axes of the world's ground z = 0."""
-    R = T_world2cam[:3, :3]
-    n = R @ np.array([0.0, 0.0, 1.0])
-    centre_world = -R.T @ T_world2cam[:3, 3]
-    return n, float(centre_world[2])
+    return T_world2cam[:3, :3] @ np.array([0.0, 0.0, 1.0]), camera_height(T_world2cam)
