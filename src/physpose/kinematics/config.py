@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from physpose.errors import PhysposeError
 from physpose.pinhole import DEFAULT_DIAGONAL_FOV_DEG
 
+DEPTH_SCALE_RANGE = (0.3, 2.0)  # the fit's bounds on the factor on MediaPipe's depth
+
 VARIANT_NAMES: tuple[str, ...] = ("S", "SO", "SO+G", "SO+T", "SO+GT")
 
 
@@ -89,10 +91,12 @@ class PoseConfig:
     hard_limits: bool = True           # joint limits as L-BFGS-B bounds
 
     def __post_init__(self) -> None:
-        if not 0.3 <= self.depth_scale_prior_centre <= 2.0:  # the fit's bounds on the factor
+        low, high = DEPTH_SCALE_RANGE
+        if not low <= self.depth_scale_prior_centre <= high:
             raise PhysposeError(
-                f"depth_scale_prior_centre={self.depth_scale_prior_centre} is outside 0.3-2.0",
-                remedy="centre MediaPipe's depth factor between 0.3 and 2.0 (default 1)")
+                f"depth_scale_prior_centre={self.depth_scale_prior_centre} is outside "
+                f"{low}-{high}", remedy=f"centre MediaPipe's depth factor between {low} and "
+                f"{high} (default 1)")
         if not self.depth_scale_log_sigma > 0:
             raise PhysposeError(f"depth_scale_log_sigma={self.depth_scale_log_sigma} must be > 0",
                                 remedy="pass a positive sigma (default 0.3)")

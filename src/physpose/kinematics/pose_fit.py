@@ -16,7 +16,7 @@ import numpy as np
 
 from physpose.fk import fk
 from physpose.kinematics import objective
-from physpose.kinematics.config import PoseConfig
+from physpose.kinematics.config import DEPTH_SCALE_RANGE, PoseConfig
 from physpose.kinematics.evidence import Evidence, data_for, pad
 from physpose.kinematics.ik import inverse_kinematics
 from physpose.kinematics.objective import Fixed, Params, Settings
@@ -24,7 +24,7 @@ from physpose.kinematics.optim import minimize
 from physpose.kinematics.surface import SurfacePoints
 from physpose.skeleton import DOF_LIMITS
 
-_LOG_DEPTH_SCALE_RANGE = (np.log(0.3), np.log(2.0))
+_LOG_DEPTH_SCALE_RANGE = tuple(np.log(DEPTH_SCALE_RANGE))
 _LOG_WORLD_SCALE_RANGE = (np.log(0.7), np.log(1.4))
 _LOG_FOCAL_RANGE = np.log(3.0)  # focal within x/÷ 3 of its prior
 
