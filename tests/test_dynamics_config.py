@@ -44,6 +44,8 @@ def test_presets_and_ablations():
         ablated(PRESETS["fast"], "nothing")
     with pytest.raises(PhysposeError):
         DynamicsConfig(overlap=2.0)
+    with pytest.raises(PhysposeError, match="knot spacing"):
+        DynamicsConfig(window=0.05, overlap=0.0, knot_spacing=0.1)
     with pytest.raises(PhysposeError):
         DynamicsConfig(search="arms")
     with pytest.raises(PhysposeError):

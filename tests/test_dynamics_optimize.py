@@ -15,6 +15,7 @@ from physpose.dynamics.balance import BalanceGains
 from physpose.dynamics.ilqr import RefineConfig
 from physpose.dynamics.optimize import foot_heights, reference_motion, searched_dofs
 from physpose.dynamics.search import cma_strategy, window_seed
+from physpose.dynamics.spline import KnotGrid
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.dynamics.windows import blend_weights, plan_windows
 from physpose.errors import PhysposeError
@@ -259,6 +260,31 @@ def test_independent_windows_are_blended(clip):
     weights = blend_weights(wins, 41)
     np.testing.assert_allclose(weights.sum(axis=0), 1.0)
     assert wins[-1].last == 40 and wins[-1].last - wins[-1].first == 10
+
+
+@pytest.mark.parametrize("fps", [24.0, 25.0, 29.97, 30.0, 60.0])
+def test_every_sequential_window_has_coefficients_of_its_own(fps):
+    # A window that begins and ends between two knots would have no spline coefficient that
+    # begins inside it, and CMA-ES cannot search nothing: a short last window (small
+    # overlaps, some clip lengths) is merged into the one before it.
+    dt, knots = 0.005, 0.1
+    for window, overlap in ((1.0, 0.0), (1.0, 0.05), (0.24, 0.0), (1.0, 0.6)):
+        for frames in range(3, 200):
+            wins = plan_windows(frames, fps, dt, window, overlap, min_span=knots)
+            assert wins[0].first == 0 and wins[-1].last == frames - 1
+            assert all(b.first <= a.last for a, b in zip(wins, wins[1:]))
+            grid = KnotGrid(knots, wins[-1].end_step * dt)
+            for win in wins[1:]:
+                active = grid.active(win.start_step * dt, win.end_step * dt)
+                assert grid.started_before(win.start_step * dt) < active.stop, (frames, win)
+
+
+def test_a_short_last_window_is_searched_with_the_one_before(clip):
+    # 21 frames in windows of 6 without overlap would leave frames 18-20 (0.72-0.80 s)
+    # between two knots; they join the window before.
+    res = run(clip, dataclasses.replace(TINY, window=0.24, overlap=0.0), checkpoints=False)
+    assert [w["frames"] for w in res.windows] == [[0, 6], [6, 12], [12, 20]]
+    assert np.isfinite(res.qpos).all()
 
 
 def test_mismatched_inputs_are_refused(clip):

@@ -149,6 +149,11 @@ class DynamicsConfig:
         if not 0 <= self.overlap < self.window:
             raise PhysposeError(f"dynamics overlap {self.overlap} s must be in [0, window)",
                                 remedy="choose an overlap shorter than the window")
+        if self.window < self.knot_spacing:
+            raise PhysposeError(f"dynamics window {self.window} s is shorter than the knot "
+                                f"spacing {self.knot_spacing} s: it could hold no control "
+                                "coefficient of its own",
+                                remedy="choose a window at least as long as the knot spacing")
         for name in ("popsize", "parallel_windows", "nthread", "candidates", "searches"):
             if getattr(self, name) < 1:
                 raise PhysposeError(f"dynamics config {name} must be >= 1",

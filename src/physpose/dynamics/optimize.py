@@ -99,7 +99,7 @@ def _check_inputs(kin: KinematicFit, obs: Observations) -> None:
 def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsConfig) -> _Setup:
     fps, dt = kin.fps, sim.dt
     windows = plan_windows(kin.num_frames, fps, dt, cfg.window, cfg.overlap,
-                           anchor_last=cfg.independent)
+                           anchor_last=cfg.independent, min_span=cfg.knot_spacing)
     num_steps = int(np.ceil(step_position(kin.num_frames - 1, fps, dt) - 1e-9))
     grounded = ground_motion(sim.model, kin.qpos, cfg.ground_snap) if cfg.ground_reference \
         else kin.qpos

@@ -45,23 +45,30 @@ def step_position(frame: np.ndarray | int, fps: float, dt: float) -> np.ndarray:
 
 
 def plan_windows(num_frames: int, fps: float, dt: float, window: float, overlap: float,
-                 anchor_last: bool = False) -> list[Window]:
+                 anchor_last: bool = False, min_span: float = 0.0) -> list[Window]:
     """Overlapping windows of ``window`` s sharing ``overlap`` s, covering every frame.
 
     The last window ends on the last frame; with ``anchor_last`` it also keeps the full
-    length (starting earlier, so it may overlap its predecessor more).
+    length (starting earlier, so it may overlap its predecessor more). No window spans less
+    than ``min_span`` s (the clip allowing): a last window that would is merged into the one
+    before it. (A sequential window searches the spline coefficients that begin inside it;
+    one shorter than the knot spacing can lie between two knots and have none.)
     """
-    length = max(2, int(round(window * fps)))
+    span = int(math.ceil(min_span * fps - 1e-9))
+    length = max(2, int(round(window * fps)), span)
     shared = min(max(0, int(round(overlap * fps))), length - 1)
     stride = length - shared
     last_frame = num_frames - 1
     starts = [0]
     while starts[-1] + length < last_frame:
         starts.append(starts[-1] + stride)
+    if len(starts) > 1 and last_frame - starts[-1] < span:
+        starts.pop()
     if anchor_last and len(starts) > 1:
         starts[-1] = max(0, last_frame - length)
-    return [window_over(i, first, min(first + length, last_frame), fps, dt)
-            for i, first in enumerate(starts)]
+    ends = [min(first + length, last_frame) for first in starts[:-1]] + [last_frame]
+    return [window_over(i, first, last, fps, dt)
+            for i, (first, last) in enumerate(zip(starts, ends))]
 
 
 def window_over(index: int, first: int, last: int, fps: float, dt: float) -> Window:
