@@ -81,10 +81,14 @@ def smooth_reference(qpos: np.ndarray, fps: float, dt: float, num_steps: int,
     rot, drot, ddrot = pos[:, 3:7], vel[:, 3:7], acc[:, 3:7]
     norm = np.linalg.norm(rot, axis=-1, keepdims=True)
     unit = rot / norm
-    # d(q/|q|)/dt for the angular velocity; omega_local = 2 (q* x qdot)_vec for a unit q.
-    dunit = drot / norm - unit * np.sum(unit * drot, axis=-1, keepdims=True) / norm
+    # The spline's quaternion q is not unit: u = q/|q|. omega_local = 2 (u* x udot)_vec and,
+    # as (udot* x udot)_vec = 0, alpha = 2 (u* x uddot)_vec = 2 (u* x qddot)_vec / |q|
+    # - 2 (d|q|/dt / |q|) omega (the terms along u itself have no vector part).
+    dnorm = np.sum(unit * drot, axis=-1, keepdims=True)
+    dunit = drot / norm - unit * dnorm / norm
     omega = 2.0 * quat.multiply(quat.conjugate(unit), dunit)[:, 1:]
-    alpha = 2.0 * quat.multiply(quat.conjugate(unit), ddrot / norm)[:, 1:]
+    alpha = 2.0 * quat.multiply(quat.conjugate(unit), ddrot / norm)[:, 1:] \
+        - 2.0 * dnorm / norm * omega
     qp = np.concatenate([pos[:, :3], unit, pos[:, 7:]], axis=1)
     qv = np.concatenate([vel[:, :3], omega, vel[:, 7:]], axis=1)
     qa = np.concatenate([acc[:, :3], alpha, acc[:, 7:]], axis=1)
