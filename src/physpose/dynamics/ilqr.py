@@ -222,7 +222,8 @@ class _Problem:
             return 0.0, {}
         m, d = self.model, self.posed
         R, tr = img.T_world2cam[:3, :3], img.T_world2cam[:3, 3]
-        fx, fy = img.K[0, 0], img.K[1, 1]
+        # Focal lengths and skew, as objective.project applies them.
+        fx, fy, skew = img.K[0, 0], img.K[1, 1], img.K[0, 1]
         delta, w = self.cfg.image_huber, self.cfg.image
         jac = np.zeros((len(img.site_ids), 3, self.nv))
         total, out = 0.0, {}
@@ -236,7 +237,8 @@ class _Problem:
                 sites = sites - img.camera_travel[f]
             pc = sites @ R.T + tr
             z = np.maximum(pc[:, 2], 0.1)
-            uv = np.column_stack([fx * pc[:, 0] / z, fy * pc[:, 1] / z]) + img.K[:2, 2]
+            u = fx * pc[:, 0] + skew * pc[:, 1]
+            uv = np.column_stack([u / z, fy * pc[:, 1] / z]) + img.K[:2, 2]
             e = (uv - img.keypoints[f, :, :2]) * img.metres_per_px[f]  # (33, 2) m
             norm = np.linalg.norm(e, axis=1)
             conf = img.keypoints[f, :, 2]
@@ -248,8 +250,8 @@ class _Problem:
             for i, site in enumerate(img.site_ids):
                 mujoco.mj_jacSite(m, d, jac[i], None, int(site))
             dpi = np.zeros((len(z), 2, 3))  # d(uv)/d(camera point)
-            dpi[:, 0, 0], dpi[:, 1, 1] = fx / z, fy / z
-            dpi[:, 0, 2], dpi[:, 1, 2] = -fx * pc[:, 0] / z ** 2, -fy * pc[:, 1] / z ** 2
+            dpi[:, 0, 0], dpi[:, 0, 1], dpi[:, 1, 1] = fx / z, skew / z, fy / z
+            dpi[:, 0, 2], dpi[:, 1, 2] = -u / z ** 2, -fy * pc[:, 1] / z ** 2
             J = np.einsum("lij,jk,lkv->liv", dpi, R, jac) * img.metres_per_px[f]  # (33, 2, nv)
             weight = w * conf * np.minimum(1.0, delta / np.maximum(norm, 1e-12))
             out[int(t)] = (np.einsum("l,liv,li->v", weight, J, e),
