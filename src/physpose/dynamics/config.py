@@ -29,10 +29,11 @@ UNKEYED_KEEP_RATIO = 1.5
 class DynamicsConfig:
     """Settings of the trajectory optimisation.
 
-    window, overlap: s (paper: 1 s windows). independent: optimise windows from the kinematic
-    state and join them (parallel_windows searched side by side). knot_spacing: s between
-    servo-target spline knots. reference_knot_spacing: s, low-pass of the kinematic estimate
-    for the initial state and targets. popsize, iterations: CMA-ES samples per iteration and
+    window, overlap: s (paper: 1 s windows; a window is at least knot_spacing long).
+    independent: optimise windows from the kinematic state and join them (parallel_windows
+    searched side by side). knot_spacing: s between servo-target spline knots.
+    reference_knot_spacing: s, low-pass of the kinematic estimate for the initial state and
+    targets. popsize, iterations: CMA-ES samples per iteration and
     iterations per window; sigma0: rad, initial step size; diagonal: diagonal covariance
     (sep-CMA) instead of full. max_root_distance: m, a sample whose root strays further from
     the kinematic root is invalid; max_penetration: m below the floor. contact_height: m, sole
