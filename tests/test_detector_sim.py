@@ -119,6 +119,18 @@ def test_same_seed_same_output_other_seed_other_output():
     assert np.array_equal(a.outliers, b.outliers) and np.array_equal(a.swapped, b.swapped)
 
 
+def test_two_clips_of_the_same_length_get_their_own_noise():
+    # The benchmark crops long clips to the same 100 frames: their noise, outliers, swaps and
+    # per-clip biases must still be drawn for each clip.
+    walk = walking_clip()
+    other = dataclasses.replace(walk, name="another_walk")
+    cfg = DetectorSimConfig(seed=7)
+    a, b = simulate_detections(walk, cfg), simulate_detections(other, cfg)
+    assert not np.allclose(a.observations.keypoints2d, b.observations.keypoints2d)
+    assert not np.allclose(a.observations.world_landmarks, b.observations.world_landmarks)
+    assert not np.array_equal(a.outliers, b.outliers)
+
+
 def person_size(sim) -> np.ndarray:
     """(T,) long side of the 2d bounding box of the true landmarks and head top, px."""
     top = project(sim.joints[:, JOINT_INDEX["head"]] + [0, 0, 0.17], sim.camera_K,

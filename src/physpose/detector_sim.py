@@ -6,7 +6,9 @@ noise in proportion to the person's size in the image, given confidences that dr
 and torso-occluded landmarks, and corrupted by occasional outliers and left/right swaps (legs,
 arms or the whole body); hip-centred world landmarks in camera axes get noise that is larger
 along the viewing direction, and per clip a scale error, a depth compression and a lean towards
-or away from the camera. Same config and seed -> bit-identical output.
+or away from the camera. The draws depend on the seed and the clip's name, so two clips of
+the same length get their own noise (before stop 69 they shared one draw). Same config, seed
+and clip -> bit-identical output.
 
 The default noise figures are in the constant block below, calibrated against real MediaPipe
 error measured on the multi-view reference (docs/mediapipe_error.md); each says where it comes
@@ -15,6 +17,7 @@ from. Masks are not simulated (`Observations.masks` is None).
 
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -289,7 +292,7 @@ def _apply_swaps(values: np.ndarray, swapped: np.ndarray) -> np.ndarray:
 def simulate_detections(clip: MocapClip, cfg: DetectorSimConfig = DetectorSimConfig()
                         ) -> SimulatedCapture:
     """Noisy 2d/3d MediaPipe-style observations of a mocap clip from a virtual static camera."""
-    rng = np.random.default_rng(cfg.seed)
+    rng = np.random.default_rng([cfg.seed, zlib.crc32(clip.name.encode())])
     t = clip.num_frames
     width, height = cfg.image_size
     K, T = look_at_camera(clip, cfg)
