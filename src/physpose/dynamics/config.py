@@ -33,9 +33,8 @@ class DynamicsConfig:
     independent: optimise windows from the kinematic state and join them (parallel_windows
     searched side by side). knot_spacing: s between servo-target spline knots.
     reference_knot_spacing: s, low-pass of the kinematic estimate for the initial state and
-    targets. popsize, iterations: CMA-ES samples per iteration and
-    iterations per window; sigma0: rad, initial step size; diagonal: diagonal covariance
-    (sep-CMA) instead of full. max_root_distance: m, a sample whose root strays further from
+    targets. popsize, iterations: CMA-ES samples per iteration and iterations per window;
+    sigma0: rad, initial step size; diagonal: diagonal covariance (sep-CMA) instead of full. max_root_distance: m, a sample whose root strays further from
     the kinematic root is invalid; max_penetration: m below the floor. contact_height: m, sole
     points this close to the floor may push in the initial inverse dynamics; ground_snap: m,
     an initial state hovering less than this is put down on the floor; ground_reference: do
