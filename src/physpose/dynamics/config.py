@@ -34,9 +34,10 @@ class DynamicsConfig:
     searched side by side). knot_spacing: s between servo-target spline knots.
     reference_knot_spacing: s, low-pass of the kinematic estimate for the initial state and
     targets. popsize, iterations: CMA-ES samples per iteration and iterations per window;
-    sigma0: rad, initial step size; diagonal: diagonal covariance (sep-CMA) instead of full. max_root_distance: m, a sample whose root strays further from
-    the kinematic root is invalid; max_penetration: m below the floor. contact_height: m, sole
-    points this close to the floor may push in the initial inverse dynamics; ground_snap: m,
+    sigma0: rad, initial step size; diagonal: diagonal covariance (sep-CMA) instead of full.
+    max_root_distance: m, a sample whose root strays further from the kinematic root is
+    invalid; max_penetration: m below the floor. contact_height: m, sole points this close to
+    the floor may push in the initial inverse dynamics; ground_snap: m,
     an initial state hovering less than this is put down on the floor; ground_reference: do
     the same to every frame of the estimate before it gives the initial targets and the COM
     targets (a foot inside the floor would stub it; a sunken body asks for bent knees).
