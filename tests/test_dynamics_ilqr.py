@@ -34,6 +34,19 @@ def _hinge_rms(states: np.ndarray, truth: np.ndarray) -> float:
     return float(np.sqrt(np.mean((states[:, 8:1 + NQ] - truth[:, 8:1 + NQ]) ** 2)))
 
 
+def _landmarks(sim, states: np.ndarray) -> np.ndarray:
+    """(S, 33, 3) world positions of the landmark sites at each state."""
+    import mujoco  # noqa: PLC0415
+
+    d = mujoco.MjData(sim.model)
+    out = []
+    for state in states:
+        d.qpos[:] = state[1:1 + NQ]
+        mujoco.mj_kinematics(sim.model, d)
+        out.append(d.site_xpos[sim.body.landmark_site_ids].copy())
+    return np.array(out)
+
+
 def _crouched(targets: np.ndarray) -> np.ndarray:
     """The targets of a crouched, leaning motion instead (hips, left knee, spine +0.08 rad)."""
     wrong = targets.copy()
@@ -195,26 +208,16 @@ def test_the_image_term_pulls_the_body_onto_the_detections(stepping, travelling)
     from physpose.dynamics.ilqr import ImageTerm  # noqa: PLC0415
     from physpose.dynamics.objective import project  # noqa: PLC0415
     from physpose.dynamics.synthetic import virtual_camera  # noqa: PLC0415
-    import mujoco  # noqa: PLC0415
 
     sim, state0, targets, truth = stepping
     K, T = virtual_camera()
     sites = sim.body.landmark_site_ids
-    d = mujoco.MjData(sim.model)
-
-    def landmarks(states: np.ndarray) -> np.ndarray:
-        out = []
-        for state in states:
-            d.qpos[:] = state[1:1 + NQ]
-            mujoco.mj_kinematics(sim.model, d)
-            out.append(d.site_xpos[sites].copy())
-        return np.array(out)
 
     steps = np.arange(8, len(truth), 8)
     travel = np.zeros((len(steps), 3))
     if travelling:
         travel[:, 0] = 0.3 * steps * sim.model.opt.timestep
-    uv = project(landmarks(truth[steps]) - travel[:, None], K, T)
+    uv = project(_landmarks(sim, truth[steps]) - travel[:, None], K, T)
     keypoints = np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))], axis=-1)
     image = ImageTerm(steps=steps, keypoints=keypoints, metres_per_px=np.full(len(steps), 0.004),
                       K=K, T_world2cam=T, site_ids=sites,
@@ -224,7 +227,7 @@ def test_the_image_term_pulls_the_body_onto_the_detections(stepping, travelling)
 
     def image_error(cfg: RefineConfig) -> float:
         refined = refine_targets(sim.model, state0, targets, qpos, qvel, cfg, image=image)
-        seen = landmarks(refined.states[steps]) - travel[:, None]
+        seen = _landmarks(sim, refined.states[steps]) - travel[:, None]
         return float(np.linalg.norm(project(seen, K, T) - uv, axis=-1).mean())
 
     base = RefineConfig(iterations=3, root_position=100.0, foot_slide=0.0)
@@ -269,21 +272,14 @@ def test_the_image_term_projects_through_a_skewed_camera(stepping):
     from physpose.dynamics.ilqr import ImageTerm, _Problem  # noqa: PLC0415
     from physpose.dynamics.objective import project  # noqa: PLC0415
     from physpose.dynamics.synthetic import virtual_camera  # noqa: PLC0415
-    import mujoco  # noqa: PLC0415
 
     sim, state0, targets, truth = stepping
     K, T = virtual_camera()
     K = K.copy()
     K[0, 1] = 0.3 * K[0, 0]  # a strong skew, so that leaving it out shows
     sites = sim.body.landmark_site_ids
-    d = mujoco.MjData(sim.model)
     steps = np.arange(8, len(truth), 8)
-    seen = []
-    for state in truth[steps]:
-        d.qpos[:] = state[1:1 + NQ]
-        mujoco.mj_kinematics(sim.model, d)
-        seen.append(d.site_xpos[sites].copy())
-    uv = project(np.array(seen), K, T)
+    uv = project(_landmarks(sim, truth[steps]), K, T)
     image = ImageTerm(steps=steps, keypoints=np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))],
                                                             axis=-1),
                       metres_per_px=np.full(len(steps), 0.004), K=K, T_world2cam=T,
