@@ -152,6 +152,16 @@ def test_mpjpe_2d_confidence_weighting():
     assert m.mpjpe_2d(est, target, np.array([[3.0, 1.0]])) == pytest.approx(6.25)
 
 
+def test_mpjpe_2d_without_weight_is_nan_and_refuses_negative_weights():
+    target = np.zeros((1, 2, 2))
+    est = np.array([[[3.0, 4.0], [0.0, 10.0]]])
+    assert np.isnan(m.mpjpe_2d(est, target, np.zeros((1, 2))))   # nothing sure to compare
+    with pytest.raises(ValueError, match="non-negative"):
+        m.mpjpe_2d(est, target, np.array([[1.0, -1.0]]))
+    with pytest.raises(ValueError, match="shape"):
+        m.mpjpe_2d(est, target, np.ones((2, 2)))
+
+
 def test_evaluate_compares_in_a_common_frame():
     gt = motion(np.outer(np.arange(6), [0.05, 0.01, 0]))
     T_world2cam = np.eye(4)

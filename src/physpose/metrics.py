@@ -116,13 +116,19 @@ def mpjpe_pa(est: np.ndarray, gt: np.ndarray) -> float:
 
 def mpjpe_2d(est_px: np.ndarray, target_px: np.ndarray,
              confidence: np.ndarray | None = None) -> float:
-    """Mean 2d distance (px). est_px, target_px: (T, J, 2); confidence: (T, J) weights or None."""
+    """Mean 2d distance (px). est_px, target_px: (T, J, 2); confidence: (T, J) weights or None.
+
+    NaN when no joint carries weight (a video whose detections are all unsure): there is
+    nothing to compare, and the benchmark's means skip NaN.
+    """
     if est_px.shape != target_px.shape or est_px.shape[-1] != 2:
         raise ValueError(f"expected matching (T, J, 2) arrays, got {est_px.shape}, {target_px.shape}")
     err = np.linalg.norm(est_px - target_px, axis=-1)
     w = np.ones_like(err) if confidence is None else np.asarray(confidence, dtype=float)
-    if w.shape != err.shape or w.sum() <= 0:
-        raise ValueError(f"confidence must be (T, J) with a positive sum, got {w.shape}")
+    if w.shape != err.shape or (w < 0).any():
+        raise ValueError(f"confidence must be (T, J) non-negative weights, got shape {w.shape}")
+    if w.sum() == 0:
+        return float("nan")
     return float((w * err).sum() / w.sum())
 
 
