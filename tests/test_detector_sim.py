@@ -77,6 +77,26 @@ def test_camera_looks_at_the_subject_from_the_configured_place():
     assert (-side[:3, :3].T @ side[:3, 3])[1] - target[1] == pytest.approx(5.0)  # at its left
 
 
+def test_camera_placement_survives_a_facing_that_averages_out():
+    clip = walking_clip(speed=0.0)
+    half = clip.num_frames // 2
+    pelvis = clip.joint("pelvis")[:, None]
+    turned = clip.joints.copy()                      # the second half faces -x: a half turn
+    turned[half:, :, :2] = 2 * pelvis[half:, :, :2] - turned[half:, :, :2]
+    clip = dataclasses.replace(clip, joints=turned)
+    left = clip.joint("l_hip") - clip.joint("r_hip")
+    assert left.mean(axis=0) == pytest.approx(np.zeros(3), abs=1e-12)
+    cfg = DetectorSimConfig(distance=5.0, height=1.5, azimuth_deg=0.0)
+    K, T = look_at_camera(clip, cfg)
+    assert np.isfinite(T).all()
+    centre = -T[:3, :3].T @ T[:3, 3]                 # in front of the first frame's facing (+x)
+    assert centre[:2] - pelvis.mean(axis=0)[0, :2] == pytest.approx([5.0, 0.0])
+    stacked = clip.joints.copy()                     # hips one above the other: no facing at all
+    stacked[:, JOINT_INDEX["l_hip"]] = stacked[:, JOINT_INDEX["r_hip"]] + [0.0, 0.0, 0.18]
+    T = look_at_camera(dataclasses.replace(clip, joints=stacked), cfg)[1]
+    assert np.isfinite(T).all()
+
+
 def test_auto_distance_keeps_everything_in_view():
     clip = walking_clip()
     sim = simulate_detections(clip, dataclasses.replace(NOISELESS, distance=None))

@@ -182,6 +182,21 @@ def synthesize_landmarks(clip: MocapClip) -> np.ndarray:
     return out
 
 
+def _mean_facing(clip: MocapClip) -> np.ndarray:
+    """The subject's mean horizontal facing direction (unit), from its hips' left direction.
+
+    Where the clip-mean left direction has no horizontal part (a turn that averages out, hips
+    stacked vertically), the first frame with one decides; failing that, world +x.
+    """
+    left = clip.joint("l_hip") - clip.joint("r_hip")
+    for candidate in (left.mean(axis=0), *left):
+        facing = np.array([candidate[1], -candidate[0], 0.0])   # left x up, made horizontal
+        norm = np.linalg.norm(facing)
+        if norm > 1e-6:
+            return facing / norm
+    return np.array([1.0, 0.0, 0.0])
+
+
 def look_at_camera(clip: MocapClip, cfg: DetectorSimConfig) -> tuple[np.ndarray, np.ndarray]:
     """Intrinsics K (3, 3) and T_world2cam (4, 4) of the configured static camera."""
     width, height = cfg.image_size
@@ -189,10 +204,7 @@ def look_at_camera(clip: MocapClip, cfg: DetectorSimConfig) -> tuple[np.ndarray,
     K = np.array([[f, 0.0, width / 2], [0.0, f, height / 2], [0.0, 0.0, 1.0]])
     pelvis = clip.joint("pelvis")
     target = pelvis.mean(axis=0)
-    left = (clip.joint("l_hip") - clip.joint("r_hip")).mean(axis=0)
-    facing = np.cross(left, [0.0, 0.0, 1.0])
-    facing[2] = 0.0
-    facing /= np.linalg.norm(facing)
+    facing = _mean_facing(clip)
     side = np.cross([0.0, 0.0, 1.0], facing)
     az = np.deg2rad(cfg.azimuth_deg)
     direction = np.cos(az) * facing + np.sin(az) * side  # from the subject towards the camera
