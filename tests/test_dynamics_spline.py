@@ -48,6 +48,10 @@ def test_active_and_started_before(start):
         before = grid.basis(np.linspace(0.0, start - 1e-6, 200))
         touched = np.flatnonzero(np.abs(before).max(axis=0) > 0)
         assert grid.started_before(start) == touched.max() + 1
+    assert grid.searched(start, 1.0, continued=False) == active
+    kept = grid.searched(start, 1.0, continued=True)      # those begun before start are kept
+    assert kept.stop == active.stop
+    assert kept.start == max(active.start, grid.started_before(start))
 
 
 def test_fit_recovers_coefficients_and_evaluate_batches():

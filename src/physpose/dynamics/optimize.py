@@ -158,9 +158,9 @@ def searched_dofs(search: str) -> np.ndarray:
 
 
 def _problem(setup: _Setup, win: Window, coefs: np.ndarray, state0: np.ndarray,
-             first_free: int, history: np.ndarray | None, cfg: DynamicsConfig) -> WindowProblem:
-    active = setup.grid.active(win.start_step * setup.sim.dt, win.end_step * setup.sim.dt)
-    free = slice(max(active.start, first_free), active.stop)
+             continued: bool, history: np.ndarray | None, cfg: DynamicsConfig) -> WindowProblem:
+    free = setup.grid.searched(win.start_step * setup.sim.dt, win.end_step * setup.sim.dt,
+                               continued)
     basis = setup.grid.basis(setup.step_times[win.start_step:win.end_step])
     mask = np.zeros(basis.shape[1], dtype=bool)
     mask[free] = True
@@ -387,9 +387,7 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             start = time.perf_counter()
             joints_so_far = np.concatenate(parts["joints"]) if parts["joints"] else np.zeros((0,))
             history = joints_so_far[max(0, win.first - 2):win.first] if w and not reset else None
-            first_free = setup.grid.started_before(win.start_step * setup.sim.dt) \
-                if w and not reset else 0
-            problem = _problem(setup, win, coefs, state, first_free, history, cfg)
+            problem = _problem(setup, win, coefs, state, bool(w) and not reset, history, cfg)
             problem, best, initial, evaluations = _search_with_retries(
                 problem, simulator, setup, cfg, timing, w, step_end,
                 f"dynamics window {w + 1}/{len(wins)}", progress)
@@ -451,7 +449,7 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
         group = todo[g:g + cfg.parallel_windows]
         start = time.perf_counter()
         problems = [_problem(setup, wins[w], setup.coefs0,
-                             _kinematic_state(setup, wins[w].start_step, cfg.ground_snap), 0, None,
+                             _kinematic_state(setup, wins[w].start_step, cfg.ground_snap), False, None,
                              cfg) for w in group]
         label = f"dynamics windows {group[0] + 1}-{group[-1] + 1}/{len(wins)}"
         searched, bests, initials, counts = search_averaged(

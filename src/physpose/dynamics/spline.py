@@ -75,6 +75,13 @@ class KnotGrid:
         """Index of the first coefficient whose basis is zero at every time before ``time``."""
         return max(0, min(int(np.ceil(time / self.spacing - 1e-9)) + 3, self.num_coefs))
 
+    def searched(self, start: float, end: float, continued: bool) -> slice:
+        """Coefficients that a window over (start, end) searches: those active in it, less
+        those begun before ``start`` when it continues the window before (kept as found)."""
+        active = self.active(start, end)
+        first = self.started_before(start) if continued else 0
+        return slice(max(active.start, first), active.stop)
+
 
 def evaluate(basis: np.ndarray, coefs: np.ndarray) -> np.ndarray:
     """Targets from coefficients: basis (S, K), coefs (..., K, D) -> (..., S, D)."""
