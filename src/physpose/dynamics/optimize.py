@@ -449,8 +449,8 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
         group = todo[g:g + cfg.parallel_windows]
         start = time.perf_counter()
         problems = [_problem(setup, wins[w], setup.coefs0,
-                             _kinematic_state(setup, wins[w].start_step, cfg.ground_snap), False, None,
-                             cfg) for w in group]
+                             _kinematic_state(setup, wins[w].start_step, cfg.ground_snap),
+                             False, None, cfg) for w in group]
         label = f"dynamics windows {group[0] + 1}-{group[-1] + 1}/{len(wins)}"
         searched, bests, initials, counts = search_averaged(
             problems, simulator, setup.objective, cfg, timing,
