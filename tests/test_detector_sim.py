@@ -17,6 +17,7 @@ from physpose.joints import (
     JOINT_INDEX,
     JOINT_NAMES,
     LANDMARK_INDEX,
+    LANDMARK_NAMES,
     joints_from_landmarks,
 )
 from physpose.metrics import project
@@ -248,3 +249,17 @@ def test_outliers_and_swaps():
     assert kp[rows, left] == pytest.approx(sim.landmarks2d[rows, right])
     assert kp[~rows, left] == pytest.approx(sim.landmarks2d[~rows, left])
     assert (sim.swapped[:, left] == sim.swapped[:, right]).all()
+
+
+def test_the_outlier_mask_marks_the_detections_after_their_swaps():
+    clip = walking_clip(200, speed=0.0)
+    sim = simulate_detections(clip, dataclasses.replace(NOISELESS, outlier_rate=0.1,
+                                                        swap_rate=0.2, seed=4))
+    truth, expected = sim.landmarks2d, sim.landmarks2d.copy()   # where each slot's belongs
+    for k, name in enumerate(LANDMARK_NAMES):
+        if name.startswith("left_"):
+            j, rows = LANDMARK_INDEX["right_" + name[5:]], sim.swapped[:, k]
+            expected[rows, k], expected[rows, j] = truth[rows, j], truth[rows, k]
+    jump = np.linalg.norm(sim.observations.keypoints2d[..., :2] - expected, axis=-1)
+    assert (sim.outliers & sim.swapped).any()
+    assert (jump[sim.outliers] > 1.0).all() and (jump[~sim.outliers] < 1e-6).all()

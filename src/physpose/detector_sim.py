@@ -344,7 +344,8 @@ def simulate_detections(clip: MocapClip, cfg: DetectorSimConfig = DetectorSimCon
     uv = uv + outliers[..., None] * (jump[..., None] * np.stack([np.cos(angle), np.sin(angle)], -1))
     conf = np.where(outliers, rng.uniform(*OUTLIER_CONFIDENCE, (t, NUM_LANDMARKS)), conf)
     swapped = _swap_events(rng, t, cfg.swap_rate)
-    uv, conf, wl = (_apply_swaps(v, swapped) for v in (uv, conf, wl))
+    # The outlier mask follows its detections into their swapped slots.
+    uv, conf, wl, outliers = (_apply_swaps(v, swapped) for v in (uv, conf, wl, outliers))
 
     inside = ((uv >= 0) & (uv <= np.array([width, height]))).all(axis=-1)
     conf = np.clip(np.where(inside, conf, np.minimum(conf, OUTSIDE_CONFIDENCE)), 0.0, 1.0)
