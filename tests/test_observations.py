@@ -2,7 +2,13 @@ import numpy as np
 import pytest
 
 from physpose.errors import PhysposeError
-from physpose.joints import JOINT_NAMES, NUM_LANDMARKS, joints_from_landmarks
+from physpose.joints import (
+    JOINT_NAMES,
+    LANDMARK_INDEX,
+    NUM_LANDMARKS,
+    joint_confidence,
+    joints_from_landmarks,
+)
 from physpose.observations import Observations
 
 
@@ -64,6 +70,16 @@ def test_joint_proxies_from_landmarks():
     joints = joints_from_landmarks(lm)
     assert joints.shape == (len(JOINT_NAMES), 3)
     np.testing.assert_allclose(joints[0], 0.5 * (lm[23] + lm[24]))  # pelvis = mid-hips
+
+
+def test_a_proxy_joint_is_as_sure_as_its_least_sure_landmark():
+    conf = np.ones((2, NUM_LANDMARKS))
+    conf[1, LANDMARK_INDEX["right_hip"]] = 0.0             # one hip lost in the second frame
+    joints = joint_confidence(conf)
+    assert joints.shape == (2, len(JOINT_NAMES)) and (joints[0] == 1.0).all()
+    lost = {JOINT_NAMES[j] for j in np.flatnonzero(joints[1] == 0.0)}
+    assert lost == {"pelvis", "spine", "r_hip"}             # the mean would have kept 0.5
+    assert (joints[1][[JOINT_NAMES.index(n) for n in JOINT_NAMES if n not in lost]] == 1).all()
 
 
 def test_reconstruction_roundtrip(tmp_path):

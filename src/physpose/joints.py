@@ -80,3 +80,16 @@ def joints_from_landmarks(landmarks: np.ndarray) -> np.ndarray:
         "spine": 0.5 * (pelvis + thorax), "neck": 0.5 * (thorax + head),
     }
     return np.stack([derived[n] if n in derived else at(_DIRECT[n]) for n in JOINT_NAMES], axis=-2)
+
+
+def joint_confidence(confidence: np.ndarray) -> np.ndarray:
+    """Per-joint detection confidence from the landmarks': (..., 33) -> (..., len(JOINT_NAMES)).
+
+    A joint observed directly has its landmark's; a proxy placed between landmarks (pelvis,
+    spine, thorax, neck, head) has the least of theirs: a pelvis is as sure as its less sure hip.
+    """
+    conf = np.asarray(confidence, dtype=float)
+    if conf.shape[-1] != NUM_LANDMARKS:
+        raise ValueError(f"expected {NUM_LANDMARKS} confidences on the last axis, got {conf.shape}")
+    uses = joints_from_landmarks(np.eye(NUM_LANDMARKS)[..., None])[..., 0].T > 0   # (J, 33)
+    return np.where(uses, conf[..., None, :], np.inf).min(axis=-1)

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 
 from physpose.benchmark.material import Clip, Truth
-from physpose.joints import joints_from_landmarks
+from physpose.joints import joint_confidence, joints_from_landmarks
 from physpose.metrics import CONTACT_PRESETS, camera_height, evaluate, project, transform_points
 from physpose.reconstruction import Reconstruction
 
@@ -42,7 +42,7 @@ def score_clip(clip: Clip, recon: Reconstruction) -> tuple[dict[str, float], dic
     else:
         kp = np.asarray(clip.observations.keypoints2d)
         target = joints_from_landmarks(kp[..., :2])
-        conf = joints_from_landmarks(kp[..., 2:])[..., 0]
+        conf = joint_confidence(kp[..., 2])
         weight = (conf >= MIN_DETECTION_CONFIDENCE) & clip.observations.detected[:, None]
         # Without truth, a physics motion's falls are judged against its kinematic input.
         metrics = evaluate(joints, fps=recon.fps, contact=contact, est_2d=est_2d,
