@@ -43,7 +43,8 @@ SOURCES = {"taichi": ("taichi_static.mp4", 2.0, 3.0),
 
 
 def _hide_person(frames: Frames) -> Frames:
-    """Black out the middle third of frames 30-39 (where the tai chi player stands)."""
+    """Black out frames 30-39 from a third of the width to 10 px past two thirds (where the
+    tai chi player stands)."""
     out = [f.copy() for f in frames]
     for f in out[30:40]:
         w = f.shape[1]
@@ -113,14 +114,20 @@ def person_height_px(keypoints2d: np.ndarray) -> float:
 
 
 def run_variant(name: str, video: Path, folder: Path) -> dict:
+    """One copy through the pipeline and scored; a failure anywhere is recorded, not raised."""
     row: dict = {"variant": name, "video": str(video)}
-    start = time.perf_counter()
     try:
-        rec = reconstruct(video, folder, PipelineConfig(), resume=False, progress=False)
+        row.update(_reconstruct_and_score(video, folder))
     except Exception as error:  # noqa: BLE001 (the sweep records any failure and goes on)
         row.update(error=f"{type(error).__name__}: {error}",
                    traceback=traceback.format_exc(limit=6))
-        return row
+    return row
+
+
+def _reconstruct_and_score(video: Path, folder: Path) -> dict:
+    row: dict = {}
+    start = time.perf_counter()
+    rec = reconstruct(video, folder, PipelineConfig(), resume=False, progress=False)
     row["time_s"] = time.perf_counter() - start
     row.update(frames=rec.num_frames, fps=rec.fps, restarts=len(rec.restarts),
                dynamics_s_per_s=rec.meta["timings_s"]["dynamics"] * rec.fps / rec.num_frames)
@@ -134,6 +141,19 @@ def run_variant(name: str, video: Path, folder: Path) -> dict:
     row["physics"]["fallen_pct"] = fallen(rec.joints("physics"), rec.joints_kinematic,
                                           rec.joint_names)
     return row
+
+
+def _finite(value):
+    """A JSON-ready copy: numbers as floats, non-finite ones as None (JSON has no NaN)."""
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if np.isfinite(value) else None
+    return value
 
 
 def _cell(value, spec: str) -> str:
@@ -179,6 +199,10 @@ def main() -> None:
             continue
         if source not in segments:
             segments[source] = read_segment(path, *SOURCES[source][1:])
+        if not segments[source][0]:
+            skipped.append(f"{name}: no frames read from {path}")
+            print(f"skipping {name}: no frames read from {path} in {SOURCES[source][1:]} s")
+            continue
         frames, fps = VARIANTS[name][1](*segments[source])
         video = args.out / f"{name}.mp4"
         write_video(video, frames, fps)
@@ -188,8 +212,8 @@ def main() -> None:
     print_table(rows)
     meta = {"machine": platform.machine(), "cpus": os.cpu_count(),
             "python": platform.python_version(), "sources": SOURCES, "skipped": skipped}
-    (args.out / "results.json").write_text(json.dumps({"meta": meta, "rows": rows}, indent=1,
-                                                      default=float) + "\n")
+    doc = json.dumps(_finite({"meta": meta, "rows": rows}), indent=1, allow_nan=False)
+    (args.out / "results.json").write_text(doc + "\n")
     print(f"wrote {args.out / 'results.json'}")
     raise SystemExit(1 if any("error" in r for r in rows) else 0)
 
