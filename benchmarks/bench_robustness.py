@@ -1,15 +1,15 @@
 """Robustness sweep: the whole pipeline on altered copies of the shared real videos.
 
-Each source segment is re-encoded as it is ("original") and altered in ways that footage from
-users differs: mirrored, cropped to portrait, low resolution, half the frame rate, dark and
+Each source segment is re-encoded as it is ("original") and altered in the ways users' footage
+differs: mirrored, cropped to portrait, low resolution, half the frame rate, dark and
 noisy, the person hidden for 10 frames, one second only, every frame shown twice at 60 fps.
 Every copy runs through `pipeline.reconstruct` with the default preset. The sweep records
 whether it finished (an exception is recorded and the sweep goes on), the physics' restarts,
 its time, and the image error and foot skate of both motions. Image errors are also given as a
 percentage of the person's height in the image, so that resolutions compare.
 
-Needs ../shared/data/video (each source skipped with a message when absent). About 20 min on
-the 2-core machine. Usage:
+Needs ../shared/data/video (each source skipped with a message when absent). All 11 copies
+took 13 min on a 2-core machine. Usage:
 
     uv run python benchmarks/bench_robustness.py --out out/robustness [--only taichi_mirror]
 
