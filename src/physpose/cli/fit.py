@@ -49,7 +49,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "analysis rate in real time (default 1)")
     p.add_argument("--camera", type=Path, metavar="CALIB",
                    help="camera intrinsics: a JSON file with K = [[fx,0,cx],[0,fy,cy],[0,0,1]] "
-                        "or a text file of the 9 numbers (default: estimated)")
+                        "or a text file of the 9 numbers (default: the focal length that a "
+                        "camera turning by 5 degrees or more reveals, else a 55-degree field of "
+                        "view across the image's diagonal)")
     p.add_argument("--no-cache", action="store_true", help="recompute even if cached")
     p.add_argument("--no-overlay", action="store_true", help="skip the overlay video")
     p.set_defaults(func=_run)

@@ -119,7 +119,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(docs/dynamics.md, A travelling camera)")
     g.add_argument("--camera", type=Path, metavar="FILE",
                    help="camera calibration: a Qualisys .qca.txt, or a JSON file "
-                        '{"K": [[fx,0,cx],[0,fy,cy],[0,0,1]]} (default: intrinsics estimated)')
+                        '{"K": [[fx,0,cx],[0,fy,cy],[0,0,1]]} (default: the focal length that '
+                        "a camera turning by 5 degrees or more reveals, else a 55-degree field "
+                        "of view across the image's diagonal; give the real one for a cropped or "
+                        "zoomed video)")
     g.add_argument("--camera-name", metavar="NAME",
                    help="which camera of a .qca.txt (default: the only one whose image size "
                         "matches the video, else the one named in the video's file name)")
