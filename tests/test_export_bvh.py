@@ -1,4 +1,4 @@
-"""BVH export: the file re-read by our own parser and forward kinematics gives the body back."""
+"""BVH export: the file read back by physpose.mocap's BVH reader gives the body back."""
 
 from __future__ import annotations
 
@@ -8,15 +8,26 @@ import pytest
 
 from physpose.errors import PhysposeError
 from physpose.export import export
-from physpose.export.bvh import R_WORLD2BVH, bvh_positions, read_bvh, write_bvh
+from physpose.export.bvh import R_WORLD2BVH, write_bvh
+from physpose.mocap.bvh import bvh_forward_kinematics, parse_bvh
 from physpose.render.bodymotion import body_motion, reconstruction_motion
 from synthetic_result import make_reconstruction, save_result, tiny_humanoid_mjcf, walking_qpos
 
 
 def _positions_by_name(path, names):
-    clip = read_bvh(path)
-    pos = bvh_positions(clip) @ R_WORLD2BVH  # back to world axes (z up)
-    return pos[:, [clip.names.index(n) for n in names]], clip
+    clip = parse_bvh(path)
+    pos = bvh_forward_kinematics(clip)[0] @ R_WORLD2BVH  # back to world axes (z up)
+    return pos[:, [_names(clip).index(n) for n in names]], clip
+
+
+def _names(clip) -> list[str]:
+    """Every node's name; the reader adds each End Site as a node named <parent>_end."""
+    return [node.name for node in clip.nodes]
+
+
+def _joints(clip) -> list:
+    """The BVH joints proper (End Sites, which have no channels, left out)."""
+    return [node for node in clip.nodes if node.channels]
 
 
 def test_round_trip_matches_body_positions_within_a_millimetre(tmp_path):
@@ -28,10 +39,10 @@ def test_round_trip_matches_body_positions_within_a_millimetre(tmp_path):
     assert clip.motion.shape == (40, 6 + 3 * (len(motion.tree.names) - 1))
     assert clip.frame_time == pytest.approx(1 / rec.fps)
     # The offsets are the subject's segment lengths: thigh -> shin is 0.42 m in the model.
-    shin = clip.names.index("l_shin")
-    assert np.linalg.norm(clip.offsets[shin]) == pytest.approx(0.42, abs=1e-6)
-    assert set(clip.end_sites) == {clip.names.index(n) for n in
-                                   ("head", "l_forearm", "r_forearm", "l_foot", "r_foot")}
+    shin = clip.nodes[_names(clip).index("l_shin")]
+    assert np.linalg.norm(shin.offset) == pytest.approx(0.42, abs=1e-6)
+    ends = {clip.nodes[node.parent].name for node in clip.nodes if not node.channels}
+    assert ends == {"head", "l_forearm", "r_forearm", "l_foot", "r_foot"}
 
 
 def test_joint_sites_follow_from_the_bvh_bodies(tmp_path):
@@ -39,13 +50,12 @@ def test_joint_sites_follow_from_the_bvh_bodies(tmp_path):
     rec = make_reconstruction(num_frames=12)
     motion = reconstruction_motion(rec, "physics")
     path = write_bvh(motion, rec.fps, tmp_path / "m.bvh")
-    clip = read_bvh(path)
     # Knee site sits at the shin origin, wrist 0.26 m below the forearm origin.
-    pos, _ = _positions_by_name(path, ("l_shin",))
+    pos, clip = _positions_by_name(path, ("l_shin",))
     knee = rec.joint_names.index("l_knee")
     assert np.abs(pos[:, 0] - rec.joints_physics[:, knee]).max() < 1e-3
-    assert clip.names[0] == "pelvis" and clip.channels[0][:3] == ("Xposition", "Yposition",
-                                                                   "Zposition")
+    assert clip.nodes[0].name == "pelvis"
+    assert clip.nodes[0].channels[:3] == ("xposition", "yposition", "zposition")
 
 
 def test_offset_hinge_gets_position_channels(tmp_path):
@@ -62,7 +72,7 @@ def test_offset_hinge_gets_position_channels(tmp_path):
     motion = body_motion(spec.to_xml(), qpos)
     path = write_bvh(motion, 25.0, tmp_path / "arm.bvh")
     pos, clip = _positions_by_name(path, ("root", "arm"))
-    assert len(clip.channels[clip.names.index("arm")]) == 6
+    assert len(clip.nodes[_names(clip).index("arm")].channels) == 6
     assert np.abs(pos - motion.pos).max() < 1e-3
 
 
@@ -88,8 +98,8 @@ def test_malformed_bvh_is_reported(tmp_path):
     bad = tmp_path / "bad.bvh"
     bad.write_text("HIERARCHY\nROOT a\n{\nOFFSET 0 0 0\nCHANNELS 3 Xrotation Yrotation Zrotation\n"
                    "}\nMOTION\nFrames: 2\nFrame Time: 0.04\n1 2 3\n")
-    with pytest.raises(PhysposeError, match="expected 2 x 3"):
-        read_bvh(bad)
+    with pytest.raises(PhysposeError, match="header says 2 frames but 1 motion rows"):
+        parse_bvh(bad)
 
 
 def test_real_body_round_trips_through_bvh_and_glb(tmp_path):
@@ -109,7 +119,7 @@ def test_real_body_round_trips_through_bvh_and_glb(tmp_path):
         g.name for g in motion.tree.geoms if g.kind == "box"}
     pos, clip = _positions_by_name(write_bvh(motion, 25.0, tmp_path / "b.bvh"), motion.tree.names)
     assert np.abs(pos - motion.pos).max() < 1e-3
-    assert sum(len(c) for c in clip.channels) == 6 + 3 * (len(clip.names) - 1)
+    assert sum(len(node.channels) for node in clip.nodes) == 6 + 3 * (len(_joints(clip)) - 1)
     glb = write_glb(motion, 25.0, tmp_path / "b.glb")
     assert structural_problems(glb) == []
     doc, blob = read_glb(glb)
