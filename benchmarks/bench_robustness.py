@@ -19,7 +19,6 @@ Exits 1 when a variant failed.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
 import time
@@ -30,6 +29,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from physpose.benchmark.report import results_json
 from physpose.metrics import fallen
 from physpose.outputs import motion_metrics
 from physpose.paths import shared_data_dir
@@ -143,19 +143,6 @@ def _reconstruct_and_score(video: Path, folder: Path) -> dict:
     return row
 
 
-def _finite(value):
-    """A JSON-ready copy: numbers as floats, non-finite ones as None (JSON has no NaN)."""
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if np.isfinite(value) else None
-    return value
-
-
 def _cell(value, spec: str) -> str:
     return "-" if value is None or not np.isfinite(value) else spec.format(value)
 
@@ -212,8 +199,7 @@ def main() -> None:
     print_table(rows)
     meta = {"machine": platform.machine(), "cpus": os.cpu_count(),
             "python": platform.python_version(), "sources": SOURCES, "skipped": skipped}
-    doc = json.dumps(_finite({"meta": meta, "rows": rows}), indent=1, allow_nan=False)
-    (args.out / "results.json").write_text(doc + "\n")
+    (args.out / "results.json").write_text(results_json({"meta": meta, "rows": rows}) + "\n")
     print(f"wrote {args.out / 'results.json'}")
     raise SystemExit(1 if any("error" in r for r in rows) else 0)
 

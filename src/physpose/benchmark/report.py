@@ -172,10 +172,16 @@ def write_results(doc: dict, out_dir: str | Path) -> tuple[Path, Path]:
     out.mkdir(parents=True, exist_ok=True)
     json_path, md_path = out / "results.json", out / "results.md"
     tmp = json_path.with_suffix(".json.partial")
-    tmp.write_text(json.dumps(_finite(doc), indent=1, allow_nan=False, default=_jsonable) + "\n")
+    tmp.write_text(results_json(doc) + "\n")
     tmp.replace(json_path)
     md_path.write_text(render_markdown(doc) + "\n")
     return json_path, md_path
+
+
+def results_json(doc) -> str:
+    """The document as strict JSON text: non-finite floats as null, NumPy values as lists or
+    numbers."""
+    return json.dumps(_finite(doc), indent=1, allow_nan=False, default=_jsonable)
 
 
 def _finite(value):
