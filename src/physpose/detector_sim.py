@@ -17,6 +17,7 @@ from. Masks are not simulated (`Observations.masks` is None).
 
 from __future__ import annotations
 
+import itertools
 import zlib
 from dataclasses import dataclass
 
@@ -189,7 +190,7 @@ def _mean_facing(clip: MocapClip) -> np.ndarray:
     stacked vertically), the first frame with one decides; failing that, world +x.
     """
     left = clip.joint("l_hip") - clip.joint("r_hip")
-    for candidate in (left.mean(axis=0), *left):
+    for candidate in itertools.chain([left.mean(axis=0)], left):   # frames only if needed
         facing = np.array([candidate[1], -candidate[0], 0.0])   # left x up, made horizontal
         norm = np.linalg.norm(facing)
         if norm > 1e-6:
