@@ -80,6 +80,6 @@ def test_the_reference_angular_acceleration_is_its_angular_velocity_differentiat
     ref = smooth_reference(qpos, fps, DT, steps, 0.1)
     differentiated = np.gradient(ref.qvel[:, 3:6], DT, axis=0)
     inner = slice(40, steps - 40)
-    # Within 0.1 rad/s^2 (central differences across the knots' jumps in jerk); the norm
-    # left out gave 0.22 and 1.3 rad/s^2.
+    # Measured 0.08-0.09 rad/s^2, bounded at 0.15 (central differences across the knots'
+    # jumps in jerk); the norm left out gave 0.22 and 1.3 rad/s^2.
     assert np.abs(ref.qacc[inner, 3:6] - differentiated[inner]).max() < 0.15
