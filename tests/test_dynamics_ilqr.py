@@ -303,3 +303,24 @@ def test_the_image_term_projects_through_a_skewed_camera(stepping):
         numeric[axis] = (problem.image_terms(plus, False)[0]
                          - problem.image_terms(minus, False)[0]) / 2e-6
     np.testing.assert_allclose(gradient, numeric, rtol=1e-4, atol=1e-6)
+
+
+def test_the_projection_jacobian_matches_the_projection():
+    """The image term's derivative of the normalised coordinates matches central differences
+    of ``objective.project``, also for a point inside the clamped depth, where it is flat
+    in depth."""
+    from physpose.dynamics.ilqr import _normalised_jacobian  # noqa: PLC0415
+    from physpose.dynamics.objective import MIN_DEPTH, project  # noqa: PLC0415
+
+    K = np.array([[1000.0, 0.0, 0.0], [0.0, 1000.0, 0.0], [0.0, 0.0, 1.0]])
+    T = np.eye(4)
+    points = np.array([[0.3, -0.2, 3.0], [-1.0, 0.5, 1.2], [0.2, 0.1, 0.5 * MIN_DEPTH]])
+    numeric = np.zeros((len(points), 2, 3))
+    for axis in range(3):
+        step = np.zeros(3)
+        step[axis] = 1e-6
+        numeric[:, :, axis] = (project(points + step, K, T) - project(points - step, K, T)) \
+            / 2e-6 / 1000.0
+    analytic = _normalised_jacobian(points)
+    np.testing.assert_allclose(analytic, numeric, rtol=1e-6, atol=1e-6)
+    assert np.all(analytic[2, :, 2] == 0.0)

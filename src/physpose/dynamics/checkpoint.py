@@ -15,7 +15,7 @@ import numpy as np
 from physpose.cache import atomic_path, stage_key
 from physpose.paths import cache_dir
 
-CHECKPOINT_VERSION = 5  # bump when the optimisation's results change for the same inputs
+CHECKPOINT_VERSION = 6  # bump when the optimisation's results change for the same inputs
 
 
 def run_key(config_identity: dict, inputs: dict) -> str:

@@ -53,6 +53,7 @@ import mujoco
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from physpose.dynamics.objective import MIN_DEPTH, project
 from physpose.errors import PhysposeError
 from physpose.skeleton import NUM_DOF
 
@@ -142,6 +143,17 @@ class ImageTerm:
     camera_travel: np.ndarray | None = None
 
 
+def _normalised_jacobian(points: np.ndarray) -> np.ndarray:
+    """(L, 2, 3): the derivative of ``objective.project``'s normalised coordinates (x/z, y/z)
+    by the camera-frame points (L, 3); a depth clamped at MIN_DEPTH does not vary."""
+    z = np.maximum(points[:, 2], MIN_DEPTH)
+    free = points[:, 2] > MIN_DEPTH
+    out = np.zeros((len(points), 2, 3))
+    out[:, 0, 0] = out[:, 1, 1] = 1.0 / z
+    out[:, :, 2] = np.where(free[:, None], -points[:, :2] / z[:, None] ** 2, 0.0)
+    return out
+
+
 class _Problem:
     """One window's tracking problem on a model: ``data`` steps its rollouts, ``posed`` poses
     states for the foot and image terms (the derivatives' threads make their own)."""
@@ -222,8 +234,6 @@ class _Problem:
             return 0.0, {}
         m, d = self.model, self.posed
         R, tr = img.T_world2cam[:3, :3], img.T_world2cam[:3, 3]
-        # Focal lengths and skew, as objective.project applies them.
-        fx, fy, skew = img.K[0, 0], img.K[1, 1], img.K[0, 1]
         delta, w = self.cfg.image_huber, self.cfg.image
         jac = np.zeros((len(img.site_ids), 3, self.nv))
         total, out = 0.0, {}
@@ -235,10 +245,7 @@ class _Problem:
             sites = d.site_xpos[img.site_ids]
             if img.camera_travel is not None:
                 sites = sites - img.camera_travel[f]
-            pc = sites @ R.T + tr
-            z = np.maximum(pc[:, 2], 0.1)
-            u = fx * pc[:, 0] + skew * pc[:, 1]
-            uv = np.column_stack([u / z, fy * pc[:, 1] / z]) + img.K[:2, 2]
+            uv = project(sites, img.K, img.T_world2cam)  # the search's own projection
             e = (uv - img.keypoints[f, :, :2]) * img.metres_per_px[f]  # (33, 2) m
             norm = np.linalg.norm(e, axis=1)
             conf = img.keypoints[f, :, 2]
@@ -249,9 +256,7 @@ class _Problem:
             mujoco.mj_comPos(m, d)
             for i, site in enumerate(img.site_ids):
                 mujoco.mj_jacSite(m, d, jac[i], None, int(site))
-            dpi = np.zeros((len(z), 2, 3))  # d(uv)/d(camera point)
-            dpi[:, 0, 0], dpi[:, 0, 1], dpi[:, 1, 1] = fx / z, skew / z, fy / z
-            dpi[:, 0, 2], dpi[:, 1, 2] = -u / z ** 2, -fy * pc[:, 1] / z ** 2
+            dpi = img.K[:2, :2] @ _normalised_jacobian(sites @ R.T + tr)  # d(uv)/d(camera)
             J = np.einsum("lij,jk,lkv->liv", dpi, R, jac) * img.metres_per_px[f]  # (33, 2, nv)
             weight = w * conf * np.minimum(1.0, delta / np.maximum(norm, 1e-12))
             out[int(t)] = (np.einsum("l,liv,li->v", weight, J, e),

@@ -61,7 +61,7 @@ TV_SCALE = 0.1             # the TV term's unit: 10 m/s^2 of acceleration change
 LIMIT_SOFTNESS = 0.05      # rad: the limit penalty grows e-fold per this much excess
 _PRIOR_MEAN = np.clip(0.0, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])   # (48,) rad
 _PRIOR_STD = (DOF_LIMITS[:, 1] - DOF_LIMITS[:, 0]) / 4.0         # (48,) rad
-_MIN_DEPTH = 0.1           # m: landmarks closer to the camera than this are projected at it
+MIN_DEPTH = 0.1            # m: landmarks closer to the camera than this are projected at it
 SWING_HEIGHT = 0.04        # m above standing: a reference foot this high is in swing
 # Landmark indices of each foot (left, right): ankle, heel, toe.
 FOOT_LANDMARKS = tuple(tuple(LANDMARK_NAMES.index(f"{side}_{part}")
@@ -207,7 +207,7 @@ def make_reference(model: mujoco.MjModel, qpos: np.ndarray, keypoints2d: np.ndar
         com=centre_of_mass(model, qpos), com_velocity=np.diff(smooth_com, axis=0) * fps,
         keypoints2d=np.asarray(keypoints2d, dtype=float),
         camera_K=np.asarray(camera_K, dtype=float), T_world2cam=np.asarray(T_world2cam, dtype=float),
-        metres_per_px=np.maximum(depth, _MIN_DEPTH) / focal, fps=float(fps),
+        metres_per_px=np.maximum(depth, MIN_DEPTH) / focal, fps=float(fps),
         feet=root_relative_feet(landmarks, qpos), swing=swing,
         camera_travel=None if camera_travel is None else np.asarray(camera_travel, dtype=float))
 
@@ -226,9 +226,9 @@ def _cost_pose(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, his
 
 
 def project(points: np.ndarray, K: np.ndarray, T_world2cam: np.ndarray) -> np.ndarray:
-    """Pinhole projection (..., 3) world -> (..., 2) px, depth clamped at _MIN_DEPTH."""
+    """Pinhole projection (..., 3) world -> (..., 2) px, depth clamped at MIN_DEPTH."""
     cam = transform_points(T_world2cam, points)
-    z = np.maximum(cam[..., 2:3], _MIN_DEPTH)
+    z = np.maximum(cam[..., 2:3], MIN_DEPTH)
     return (cam[..., :2] / z) @ K[:2, :2].T + K[:2, 2]
 
 
