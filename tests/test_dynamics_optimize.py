@@ -251,6 +251,20 @@ def test_windows_checkpointed_without_forces_resume_with_nan_forces(clip, tmp_pa
     assert np.isfinite(resumed.grf[second + 1:]).all()
 
 
+def test_a_damaged_checkpoint_is_optimised_again(clip, tmp_path, caplog):
+    """A window file cut short (a full disk, a partial copy) is dropped with a warning and
+    that window is optimised again, to the result of the run that wrote it."""
+    whole = run(clip, checkpoint_dir=tmp_path)
+    folder = next(tmp_path.iterdir())
+    damaged = checkpoint.window_path(folder, 1)
+    damaged.write_bytes(damaged.read_bytes()[:200])
+    with caplog.at_level("WARNING", logger="physpose.dynamics.checkpoint"):
+        resumed = run(clip, checkpoint_dir=tmp_path)
+    assert "unreadable checkpoint" in caplog.text and damaged.name in caplog.text
+    np.testing.assert_array_equal(resumed.qpos, whole.qpos)
+    assert checkpoint.load_window(folder, 1) is not None  # written again
+
+
 def test_independent_windows_are_blended(clip):
     res = run(clip, dataclasses.replace(TINY, independent=True), checkpoints=False)
     assert np.isfinite(res.qpos).all() and np.isfinite(res.grf).all()

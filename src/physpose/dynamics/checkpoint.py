@@ -8,12 +8,16 @@ new key and so a new folder, never a stale result.
 from __future__ import annotations
 
 import json
+import logging
+import zipfile
 from pathlib import Path
 
 import numpy as np
 
 from physpose.cache import atomic_path, stage_key
 from physpose.paths import cache_dir
+
+_log = logging.getLogger(__name__)
 
 CHECKPOINT_VERSION = 6  # bump when the optimisation's results change for the same inputs
 
@@ -44,11 +48,18 @@ def save_window(folder: Path, index: int, arrays: dict[str, np.ndarray], record:
 
 
 def load_window(folder: Path, index: int) -> tuple[dict[str, np.ndarray], dict] | None:
-    """A finished window's (arrays, record), or None when it has not been written."""
+    """A finished window's (arrays, record), or None when it has not been written. An
+    unreadable file (a disk filled up, a copy cut short) is logged, deleted and optimised
+    again, like a window that was never written."""
     path = window_path(folder, index)
     if not path.is_file():
         return None
-    with np.load(path, allow_pickle=False) as data:
-        arrays = {k: data[k] for k in data.files if k != "record_json"}
-        record = json.loads(str(data["record_json"]))
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files if k != "record_json"}
+            record = json.loads(str(data["record_json"]))
+    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+        _log.warning("%s: unreadable checkpoint (%s); this window is optimised again", path, exc)
+        path.unlink(missing_ok=True)
+        return None
     return arrays, record
