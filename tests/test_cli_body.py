@@ -48,9 +48,21 @@ def test_png(tmp_path):
     (["--height", "1.7", "--obstacle", "box:1,2"], "--obstacle #1"),
     (["--height", "1.7", "--ground-friction", "-1"], "--ground-friction"),
     (["--height", "1.7", "--ground-stiffness", "0"], "stiffness"),
+    (["--height", "1.7", "--ground-friction", "nan"], "--ground-friction nan is not"),
+    (["--height", "1.7", "--png", "body.txt"], "--png body.txt does not end in .png"),
 ])
 def test_errors_name_the_argument(tmp_path, capsys, args, message):
     assert main(["body", *args, "--out", str(tmp_path / "b.xml")]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
     assert not (tmp_path / "b.xml").exists()
+
+
+def test_an_output_path_the_file_system_refuses_is_an_error_not_a_traceback(tmp_path, capsys):
+    """Any command: an --out below a plain file names that file and exits 2."""
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    assert main(["body", "--height", "1.7", "--out", str(blocker / "b.xml")]) == 2
+    err = capsys.readouterr().err
+    assert f"{blocker}:" in err and "check that the path exists" in err
+    assert "Traceback" not in err

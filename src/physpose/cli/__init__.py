@@ -43,6 +43,12 @@ def main(argv: list[str] | None = None) -> int:
     except PhysposeError as err:
         print(f"physpose {args.command}: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:  # the file system refused: a path that is missing, wrong or locked
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"physpose {args.command}: error: {where}{err.strerror or err}. check that the "
+              "path exists, is a folder or a file as the option asks, and that you may read "
+              "and write there", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"physpose {args.command}: interrupted; finished work is kept (rerun to resume)",
               file=sys.stderr)

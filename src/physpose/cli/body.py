@@ -74,8 +74,12 @@ def _run(args: argparse.Namespace) -> int:
     _check_range("--height", args.height, HEIGHT_RANGE, "m", "1.75")
     _check_range("--mass", args.mass, MASS_RANGE, "kg", "70")
     if args.ground_friction is not None and not args.ground_friction >= 0:
-        raise PhysposeError(f"--ground-friction {args.ground_friction:g} is negative",
+        raise PhysposeError(f"--ground-friction {args.ground_friction:g} is not a coefficient "
+                            ">= 0",
                             remedy="give a friction coefficient >= 0, e.g. 0.9")
+    if args.png is not None and args.png.suffix.lower() != ".png":
+        raise PhysposeError(f"--png {args.png} does not end in .png",
+                            remedy="name the picture with .png, e.g. --png body.png")
     shape = BodyShape.from_height(args.height, args.mass, build=args.build, sex=args.sex)
     body = build_body(shape, scene_from_args(args), BodyConfig())
     args.out.parent.mkdir(parents=True, exist_ok=True)
