@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from physpose.errors import PhysposeError
+
 # The repository root when installed editable from a checkout (src/physpose/paths.py -> ../..).
 _CHECKOUT = Path(__file__).resolve().parents[2]
 
@@ -37,3 +39,19 @@ def pose2sim_demo_dir() -> Path:
 def sports2d_demo_dir() -> Path:
     """Sports2D's two-person demo video (demo.mp4), fetched by `make data`."""
     return data_dir() / "sports2d"
+
+
+def check_output_folder(path: str | Path, option: str = "--out") -> Path:
+    """Refuse, before any long work, an output folder that could not be written: a path that
+    is a file, or whose nearest existing parent is a file or not writable. Creates nothing."""
+    path = Path(path)
+    existing = next(p for p in (path, *path.absolute().parents) if p.exists())
+    if not existing.is_dir():
+        problem = "exists and is not a folder" if existing == path else \
+            f"cannot be a folder: {existing} is a file"
+        raise PhysposeError(f"output path {problem}", path=path,
+                            remedy=f"pass a folder for {option}")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise PhysposeError(f"cannot write into {existing}", path=path,
+                            remedy=f"pass a folder you may write to for {option}")
+    return path

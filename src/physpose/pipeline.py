@@ -30,6 +30,7 @@ from physpose.kinematics.config import KinematicConfig
 from physpose.keypoints_io import is_keypoints_file, load_keypoints
 from physpose.observations import Observations, check_slow_motion
 from physpose.observe import ObserveConfig, footage_observe, observe
+from physpose.paths import check_output_folder
 from physpose.reconstruction import Reconstruction
 from physpose.scene import SceneConfig
 
@@ -131,9 +132,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     from physpose.kinematics.fit import fit_kinematics, stderr_log  # noqa: PLC0415 (JAX)
 
     out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise PhysposeError("output path exists and is not a folder", path=out_dir,
-                            remedy="pass a folder for --out")
+    check_output_folder(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     windows = out_dir / CHECKPOINT_FOLDER
     if not resume and windows.exists():

@@ -12,6 +12,7 @@ from physpose.benchmark import (BenchmarkConfig, Material, MaterialConfig, avail
 from physpose.multiview.reference import find_multiview_files
 from physpose.benchmark.report import render_markdown
 from physpose.errors import PhysposeError
+from physpose.paths import check_output_folder
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -99,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if args.out is None:
         raise PhysposeError("no output folder", remedy="pass --out DIR")
+    check_output_folder(args.out)  # not after hours of work
     known = available_variants()
     unknown = [v for v in variants if v not in known]
     if unknown:

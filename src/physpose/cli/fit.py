@@ -21,6 +21,7 @@ from physpose.kinematics.fit import fit_kinematics, stderr_log
 from physpose.metrics import camera_height
 from physpose.observations import check_slow_motion
 from physpose.observe import ObserveConfig, footage_observe
+from physpose.paths import check_output_folder
 
 RECONSTRUCTION_FILE = "reconstruction.npz"
 CONFIG_FILE = "config.json"
@@ -82,6 +83,7 @@ def _run(args: argparse.Namespace) -> int:
         raise PhysposeError("--fps applies to videos, not to observations", path=args.input,
                             remedy="drop --fps")
     check_slow_motion(args.slow_motion)
+    check_output_folder(args.out)
     observe_cfg = ObserveConfig(use_cache=not args.no_cache) if args.fps is None else \
         ObserveConfig(target_fps=args.fps, use_cache=not args.no_cache)
     obs = load_observations(args.input, footage_observe(observe_cfg, args.slow_motion),
@@ -97,9 +99,6 @@ def _run(args: argparse.Namespace) -> int:
     low = low_camera_message(height_found)
     if low:
         print(f"warning: {low}", file=sys.stderr, flush=True)
-    if args.out.exists() and not args.out.is_dir():
-        raise PhysposeError("output path exists and is not a folder", path=args.out,
-                            remedy="pass a folder for --out")
     args.out.mkdir(parents=True, exist_ok=True)
     recon = reconstruction_of(fit, obs)
     recon = recon.replace(meta={**recon.meta, "slow_motion": args.slow_motion,

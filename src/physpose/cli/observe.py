@@ -18,6 +18,7 @@ from physpose.keypoints_io import is_keypoints_file, load_keypoints
 from physpose.observations import Observations
 from physpose.observe import ObserveConfig, observe
 from physpose.overlay2d import write_overlay
+from physpose.paths import check_output_folder
 
 OBSERVATIONS_FILE = "observations.npz"
 OVERLAY_FILE = "overlay_landmarks.mp4"
@@ -62,10 +63,8 @@ def run_observe(source: str | Path, out_dir: str | Path, cfg: ObserveConfig = Ob
         raise PhysposeError("--fps/--start/--end/--person apply to videos, not to precomputed keypoints",
                             path=source, remedy="drop those options, or resample the keypoints "
                                                 "before writing them")
+    check_output_folder(out_dir)
     obs = load_keypoints(source) if keypoints else observe(source, cfg, progress=progress)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise PhysposeError("output path exists and is not a folder", path=out_dir,
-                            remedy="pass a folder for --out")
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=out_dir, prefix=".observe-"))
     try:

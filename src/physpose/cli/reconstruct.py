@@ -21,6 +21,7 @@ from physpose.export import FORMATS
 from physpose.keypoints_io import is_keypoints_file
 from physpose.observations import Observations
 from physpose.outputs import DEFAULT_FORMATS, METRICS_FILE, metrics_table, write_outputs
+from physpose.paths import check_output_folder
 from physpose.pipeline import CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig
 from physpose.reconstruction import Reconstruction
 from physpose.report.data import forces_summary, slow_motion_note
@@ -388,9 +389,7 @@ def run(args: argparse.Namespace) -> int:
     config = pipeline_config(args)
     image_size = check_input(args.video, config)
     check_person(args.height, args.mass)
-    if args.out.exists() and not args.out.is_dir():
-        raise PhysposeError("output path exists and is not a folder", path=args.out,
-                            remedy="pass a folder for --out")
+    check_output_folder(args.out)
     K = None if args.camera is None else camera_intrinsics(args.camera, args.camera_name,
                                                            args.video, image_size)
     timings: dict[str, float] = {}
