@@ -100,3 +100,37 @@ def test_simulated_forces_round_trip_and_are_shape_checked(tmp_path):
         rec.replace(grf_physics=np.zeros((6, 2, 3)))
     with pytest.raises(PhysposeError, match="torques_physics"):
         rec.replace(torques_physics=np.zeros((5, 48)))
+
+
+def _damage(path, how):
+    if how == "truncated":
+        path.write_bytes(path.read_bytes()[:2000])
+    elif how == "empty":
+        path.write_bytes(b"")
+    else:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+        if how == "meta not JSON":
+            arrays["meta_json"] = np.array("{not json")
+        elif how == "fps 0":
+            arrays["fps"] = np.array(0.0)
+        elif how == "a field of the wrong shape":
+            arrays["landmarks_kinematic"] = arrays["landmarks_kinematic"][:, :5]
+        np.savez(path, **arrays)
+
+
+@pytest.mark.parametrize("how, message", [
+    ("truncated", "not a readable reconstruction npz"),
+    ("empty", "not a readable reconstruction npz"),
+    ("meta not JSON", "its metadata is not JSON"),
+    ("fps 0", "frame rate 0 is not a positive number"),
+    ("a field of the wrong shape", "landmarks_kinematic has shape"),
+])
+def test_a_damaged_reconstruction_is_named_in_the_error(tmp_path, how, message):
+    """Whatever is wrong with reconstruction.npz, the error names the file (export, report and
+    overlay all load it this way)."""
+    path = make_reconstruction(num_frames=6).save(tmp_path / "reconstruction.npz")
+    _damage(path, how)
+    with pytest.raises(PhysposeError, match=message) as caught:
+        Reconstruction.load(tmp_path)
+    assert caught.value.path == str(path)

@@ -185,8 +185,21 @@ class Reconstruction:
                                 remedy="re-run the reconstruction with this physpose version")
         fields = {k: d[k] for k in _REQUIRED + _OPTIONAL if k in d}
         fields["fps"] = float(fields["fps"])
+        if not (np.isfinite(fields["fps"]) and fields["fps"] > 0):
+            raise PhysposeError(f"frame rate {fields['fps']:g} is not a positive number",
+                                path=path, remedy="re-run the reconstruction")
         fields["joint_names"] = tuple(str(n) for n in fields["joint_names"])
         if "body_mjcf" in fields:
             fields["body_mjcf"] = str(fields["body_mjcf"])
-        meta = json.loads(str(d["meta_json"])) if "meta_json" in d else {}
-        return cls(meta=meta, **fields)
+        try:
+            meta = json.loads(str(d["meta_json"])) if "meta_json" in d else {}
+        except json.JSONDecodeError as exc:
+            raise PhysposeError(f"its metadata is not JSON ({exc})", path=path,
+                                remedy="re-run the reconstruction") from None
+        try:
+            return cls(meta=meta, **fields)
+        except PhysposeError as exc:  # a field of the wrong shape: say which file holds it
+            if exc.path is not None:
+                raise
+            raise PhysposeError(exc.problem, path=path, remedy=exc.remedy
+                                or "re-run the reconstruction with this physpose version") from None
