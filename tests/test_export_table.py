@@ -53,6 +53,23 @@ def test_json_round_trip_and_motion_choice(tmp_path):
     assert list(only["motions"]) == ["kinematic"]
 
 
+def test_json_writes_a_missing_coordinate_as_null(tmp_path):
+    """JSON has no NaN: a coordinate that is not a number is written as null, which strict
+    parsers (a browser's JSON.parse) accept, where Python's bare NaN token is refused."""
+    folder = save_result(tmp_path, num_frames=4)
+    rec = Reconstruction.load(folder)
+    joints = rec.joints_kinematic.copy()
+    joints[2, 3] = np.nan
+    rec.replace(joints_kinematic=joints).save(folder / "reconstruction.npz")
+
+    def refuse(token):
+        raise ValueError(f"non-standard JSON token {token}")
+    doc = json.loads(export(folder, "json", motion="kinematic").read_text(),
+                     parse_constant=refuse)
+    assert doc["motions"]["kinematic"][2][3] == [None, None, None]
+    assert doc["motions"]["kinematic"][2][2] == pytest.approx(joints[2, 2].tolist(), abs=1e-6)
+
+
 def test_kinematic_only_result_exports_kinematic_rows(tmp_path):
     folder = save_result(tmp_path, num_frames=3, physics=False, qpos_kinematic=False)
     rows, _ = _read_csv(export(folder, "csv"), Reconstruction.load(folder).joint_names)

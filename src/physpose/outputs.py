@@ -12,7 +12,6 @@ PNG frame and the exports, all into the result folder.
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +20,7 @@ from physpose import video as videolib
 from physpose.cache import atomic_path
 from physpose.errors import PhysposeError
 from physpose.export import DEFAULT_NAMES, FORMATS, export
+from physpose.json_text import strict_json
 from physpose.metrics import CONTACT_PRESETS, evaluate, project
 from physpose.reconstruction import Reconstruction
 from physpose.render.result import available_motions, load_result
@@ -121,7 +121,7 @@ def write_outputs(result_dir: str | Path, *, video: str | Path | None = None,
     metrics = {m: motion_metrics(rec, m) for m in available_motions(rec)}
     written: dict[str, Path] = {}
     with atomic_path(folder / METRICS_FILE) as tmp:
-        tmp.write_text(json.dumps(metrics, indent=2) + "\n")
+        tmp.write_text(strict_json(metrics, indent=2) + "\n")
     written["metrics"] = folder / METRICS_FILE
     rec = _store_in_meta(folder, rec, metrics, video)
     if report:

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-import json
 import math
 from collections import defaultdict
 from pathlib import Path
+
+from physpose.json_text import strict_json
 
 # (column title, key in a result's "metrics" or "ground" dict, format); the paper's Table 2 order.
 COLUMNS: tuple[tuple[str, str, str], ...] = (
@@ -181,21 +182,4 @@ def write_results(doc: dict, out_dir: str | Path) -> tuple[Path, Path]:
 def results_json(doc) -> str:
     """The document as strict JSON text: non-finite floats as null, NumPy values as lists or
     numbers."""
-    return json.dumps(_finite(doc), indent=1, allow_nan=False, default=_jsonable)
-
-
-def _finite(value):
-    """A copy with non-finite floats replaced by None (JSON has no NaN)."""
-    if isinstance(value, dict):
-        return {k: _finite(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def _jsonable(value):
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    raise TypeError(f"{type(value).__name__} is not JSON-serialisable")
+    return strict_json(doc, indent=1)

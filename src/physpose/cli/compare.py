@@ -12,6 +12,7 @@ from physpose.benchmark.paired import (load_results, merge_results, paired_diffe
 from physpose.benchmark.report import render_paired
 from physpose.benchmark.scoring import TRUTH_ROW
 from physpose.errors import PhysposeError
+from physpose.json_text import strict_json
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -65,8 +66,8 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         if args.out.suffix == ".json":
-            args.out.write_text(json.dumps({"base": args.base, "paired": paired}, indent=1,
-                                           allow_nan=False) + "\n")
+            args.out.write_text(strict_json({"base": args.base, "paired": paired}, indent=1)
+                                + "\n")
         else:
             args.out.write_text(text + "\n")
         print(f"wrote {args.out}")

@@ -4,12 +4,12 @@ simulation's forces as CSV (one row per frame)."""
 from __future__ import annotations
 
 import csv
-import json
 from pathlib import Path
 
 import numpy as np
 
 from physpose.errors import PhysposeError
+from physpose.json_text import strict_json
 from physpose.reconstruction import GRF_PARTS, Reconstruction
 from physpose.render.result import joints_of
 from physpose.skeleton import DOF_NAMES
@@ -45,7 +45,7 @@ def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) 
         "time": np.round(np.arange(rec.num_frames) / rec.fps, 6).tolist(),
         "motions": {m: np.round(joints_of(rec, m), _DECIMALS).tolist() for m in motions},
     }
-    path.write_text(json.dumps(doc, separators=(",", ":")))
+    path.write_text(strict_json(doc, separators=(",", ":")))  # a lost joint as null
     return path
 
 

@@ -1,0 +1,25 @@
+"""JSON text every reader accepts: non-finite numbers as null (JSON has no NaN or Infinity;
+Python writes them as bare tokens that browsers and most parsers refuse), NumPy values as
+plain lists and numbers."""
+
+from __future__ import annotations
+
+import json
+import math
+
+
+def strict_json(doc, **dumps_options) -> str:
+    """``json.dumps`` of doc with every NaN and infinity replaced by null."""
+    return json.dumps(_finite(doc), allow_nan=False, **dumps_options)
+
+
+def _finite(value):
+    if hasattr(value, "tolist"):  # NumPy arrays and scalars
+        value = value.tolist()
+    if isinstance(value, dict):
+        return {k: _finite(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
