@@ -67,6 +67,19 @@ def test_corrupt_entry_is_a_miss_and_is_removed(tmp_path, caplog):
     assert not cache.path(key).exists() and "unreadable cache entry" in caplog.text
 
 
+def test_a_cache_that_cannot_be_written_is_a_warning_not_a_failure(tmp_path, caplog):
+    """The stage's result is already computed: a cache root that is a file (or not writable,
+    or on a full disk) costs only the reuse."""
+    blocker = tmp_path / "cache"
+    blocker.write_text("")
+    cache = Cache("stage", root=blocker)
+    key = "cd" * 32
+    assert cache.put(key, {"a": np.arange(3)}) is None
+    assert cache.get(key) is None
+    assert "cannot store the stage result in the cache" in caplog.text
+    assert "PHYSPOSE_CACHE_DIR" in caplog.text
+
+
 def test_atomic_path_keeps_the_old_file_on_failure(tmp_path):
     target = tmp_path / "out.txt"
     target.write_text("old")

@@ -140,11 +140,19 @@ class Cache:
             path.unlink(missing_ok=True)
             return None
 
-    def put(self, key: str, arrays: Mapping[str, np.ndarray]) -> Path:
-        """Store arrays under `key` atomically (temp file in the same folder, then rename)."""
+    def put(self, key: str, arrays: Mapping[str, np.ndarray]) -> Path | None:
+        """Store arrays under `key` atomically (temp file in the same folder, then rename).
+        A cache that cannot be written (a file in the way, no permission, a full disk) only
+        costs the next run its reuse: logged, and None returned."""
         path = self.path(key)
-        with atomic_path(path) as tmp, tmp.open("wb") as fh:
-            np.savez_compressed(fh, **{k: np.asarray(v) for k, v in arrays.items()})
+        try:
+            with atomic_path(path) as tmp, tmp.open("wb") as fh:
+                np.savez_compressed(fh, **{k: np.asarray(v) for k, v in arrays.items()})
+        except OSError as exc:
+            _log.warning("cannot store the %s result in the cache at %s (%s); going on "
+                         "without it. set PHYSPOSE_CACHE_DIR to a folder you may write to",
+                         self.stage, self.dir, exc.strerror or exc)
+            return None
         return path
 
     def clear(self) -> int:
