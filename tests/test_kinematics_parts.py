@@ -229,6 +229,14 @@ def test_cli_fit_bad_input(tmp_path, capsys):
                  str(bad_k)]) == 2
     assert "pinhole" in capsys.readouterr().err
     assert main(["fit", str(obs_path), "--out", str(tmp_path / "o"), "--fps", "10"]) == 2
+    assert "apply to videos" in capsys.readouterr().err
+    assert main(["fit", str(obs_path), "--out", str(tmp_path / "o"), "--start", "1"]) == 2
+    assert "apply to videos" in capsys.readouterr().err
+    qca = tmp_path / "Calib.qca.txt"
+    qca.write_text("<?xml version='1.0'?>")
+    assert main(["fit", str(obs_path), "--out", str(tmp_path / "o"), "--camera",
+                 str(qca)]) == 2
+    assert "--camera-name" in capsys.readouterr().err
     assert main(["fit", str(obs_path), "--out", str(tmp_path / "o"), "--slow-motion", "0"]) == 2
     assert "slow motion 0x is outside" in capsys.readouterr().err
 
@@ -238,3 +246,16 @@ def test_variant_flags_round_trip():
         assert KinematicConfig.preset(name).variant == name
     with pytest.raises(Exception):
         KinematicConfig.preset("SO", nonsense=1)
+
+
+def test_fit_observes_a_video_as_observe_does():
+    """fit takes observe's video options (its remedies name --start/--end)."""
+    from physpose.cli import build_parser  # noqa: PLC0415
+    from physpose.cli.observe import config_from_args  # noqa: PLC0415
+
+    args = build_parser().parse_args(["fit", "v.mp4", "--out", "o", "--start", "1.5", "--end",
+                                      "3", "--person", "640,360", "--static-camera", "--fps",
+                                      "20"])
+    cfg = config_from_args(args)
+    assert (cfg.start, cfg.end, cfg.person, cfg.stabilize, cfg.target_fps) == \
+        (1.5, 3.0, (640.0, 360.0), False, 20.0)

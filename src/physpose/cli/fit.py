@@ -20,7 +20,8 @@ from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
 from physpose.kinematics.fit import fit_kinematics, stderr_log
 from physpose.metrics import camera_height
 from physpose.observations import check_slow_motion
-from physpose.observe import ObserveConfig, footage_observe
+from physpose.cli.observe import add_video_options, config_from_args, video_options_given
+from physpose.observe import footage_observe
 from physpose.paths import check_output_folder
 
 RECONSTRUCTION_FILE = "reconstruction.npz"
@@ -42,8 +43,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="kinematic variant (paper's Table 1; default SO+GT)")
     p.add_argument("--height", type=float, help="the person's standing height, m")
     p.add_argument("--mass", type=float, help="the person's mass, kg")
-    p.add_argument("--fps", type=float, help="analysis frame rate for videos, Hz "
-                                             f"(default {ObserveConfig.target_fps:g})")
+    add_video_options(p)
     p.add_argument("--slow-motion", type=float, default=1.0, metavar="X",
                    help="the footage plays X times slower than real time (e.g. 4 for 120 fps "
                         "played at 30): the fit runs on the real clock and --fps is the "
@@ -53,7 +53,6 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "or a text file of the 9 numbers (default: the focal length that a "
                         "camera turning by 5 degrees or more reveals, else a 55-degree field of "
                         "view across the image's diagonal)")
-    p.add_argument("--no-cache", action="store_true", help="recompute even if cached")
     p.add_argument("--no-overlay", action="store_true", help="skip the overlay video")
     p.set_defaults(func=_run)
 
@@ -62,6 +61,12 @@ def read_intrinsics(path: Path) -> np.ndarray:
     """K (3, 3) from a JSON file ({"K": ...} or the bare matrix) or a text file of 9 numbers."""
     if not path.is_file():
         raise PhysposeError("camera file not found", path=path, remedy="check the path")
+    if path.name.lower().endswith((".qca.txt", ".qca")):
+        raise PhysposeError("a Qualisys calibration holds several cameras; this takes one "
+                            "camera's intrinsics", path=path,
+                            remedy="use `physpose reconstruct --camera FILE --camera-name NAME`, "
+                                   'or write that camera\'s {"K": [[fx, 0, cx], [0, fy, cy], '
+                                   '[0, 0, 1]]} as JSON')
     try:
         if path.suffix.lower() == ".json":
             doc = json.loads(path.read_text())
@@ -79,19 +84,18 @@ def _run(args: argparse.Namespace) -> int:
     from physpose.pipeline import load_observations
 
     start = time.perf_counter()
-    if args.fps is not None and args.input.suffix.lower() in (".npz", ".json"):
-        raise PhysposeError("--fps applies to videos, not to observations", path=args.input,
-                            remedy="drop --fps")
+    observe_cfg = config_from_args(args)
+    if args.input.suffix.lower() in (".npz", ".json") and video_options_given(observe_cfg):
+        raise PhysposeError("--fps/--start/--end/--person/--static-camera apply to videos, not "
+                            "to observations", path=args.input, remedy="drop those options")
     check_slow_motion(args.slow_motion)
     check_output_folder(args.out)
-    observe_cfg = ObserveConfig(use_cache=not args.no_cache) if args.fps is None else \
-        ObserveConfig(target_fps=args.fps, use_cache=not args.no_cache)
+    K = read_intrinsics(args.camera) if args.camera is not None else None  # before the work
     obs = load_observations(args.input, footage_observe(observe_cfg, args.slow_motion),
                             progress=sys.stderr.isatty()).on_real_clock(args.slow_motion)
     rate = rate_message(obs.fps)
     if rate:
         print(f"warning: {rate}", file=sys.stderr, flush=True)
-    K = read_intrinsics(args.camera) if args.camera is not None else None
     config = KinematicConfig.preset(args.variant, use_cache=not args.no_cache)
     fit = fit_kinematics(obs, config, height=args.height, mass=args.mass, camera_K=K,
                          log=stderr_log)

@@ -59,7 +59,7 @@ def run_observe(source: str | Path, out_dir: str | Path, cfg: ObserveConfig = Ob
     start = time.perf_counter()
     source, out_dir = Path(source), Path(out_dir)
     keypoints = is_keypoints_file(source)
-    if keypoints and cfg != dataclasses.replace(ObserveConfig(), use_cache=cfg.use_cache):
+    if keypoints and video_options_given(cfg):
         raise PhysposeError("--fps/--start/--end/--person apply to videos, not to precomputed keypoints",
                             path=source, remedy="drop those options, or resample the keypoints "
                                                 "before writing them")
@@ -106,6 +106,24 @@ def image_point(text: str) -> tuple[float, float]:
     return x, y
 
 
+def add_video_options(p: argparse.ArgumentParser) -> None:
+    """The options that say how a video is observed (observe and fit; reconstruct has its own
+    help for them, in real time under --slow-motion)."""
+    p.add_argument("--fps", type=float, default=None, metavar="F",
+                   help=f"analysis frame rate, Hz (default {ObserveConfig.target_fps:g}; "
+                        "never above the video's own)")
+    p.add_argument("--start", type=float, default=None, metavar="S", help="start time, s")
+    p.add_argument("--end", type=float, default=None, metavar="E", help="end time, s")
+    p.add_argument("--person", type=image_point, default=None, metavar="X,Y", help=PERSON_HELP)
+    p.add_argument("--static-camera", action="store_true", help=STATIC_CAMERA_HELP)
+    p.add_argument("--no-cache", action="store_true", help="recompute even if cached")
+
+
+def video_options_given(cfg: ObserveConfig) -> bool:
+    """Whether cfg asks for more than the defaults (and the cache choice)."""
+    return cfg != dataclasses.replace(ObserveConfig(), use_cache=cfg.use_cache)
+
+
 def config_from_args(args: argparse.Namespace) -> ObserveConfig:
     """ObserveConfig from the shared --fps/--start/--end/--person/--static-camera/--no-cache
     options."""
@@ -124,14 +142,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("input", type=Path, metavar="VIDEO_OR_KEYPOINTS",
                    help="video (mp4, avi, mov, ...) or keypoints file (.json, .npz)")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
-    p.add_argument("--fps", type=float, default=None, metavar="F",
-                   help=f"analysis frame rate, Hz (default {ObserveConfig.target_fps:g}; "
-                        "never above the video's own)")
-    p.add_argument("--start", type=float, default=None, metavar="S", help="start time, s")
-    p.add_argument("--end", type=float, default=None, metavar="E", help="end time, s")
-    p.add_argument("--person", type=image_point, default=None, metavar="X,Y", help=PERSON_HELP)
-    p.add_argument("--static-camera", action="store_true", help=STATIC_CAMERA_HELP)
-    p.add_argument("--no-cache", action="store_true", help="recompute even if cached")
+    add_video_options(p)
     p.add_argument("--no-overlay", action="store_true", help="skip the overlay video")
     p.set_defaults(func=_run)
 
