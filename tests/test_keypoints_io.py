@@ -164,6 +164,15 @@ def test_bad_camera_matrix(tmp_path):
     assert "camera_K has shape (2, 2)" in _error(tmp_path, _doc(camera_K=[[1, 0], [0, 1]]))
 
 
+def test_errors_found_by_the_observations_name_the_file_passed(tmp_path):
+    """A keypoints file records the video it came from; a problem in the file is still
+    reported against the file."""
+    path = _write_npz(tmp_path, _doc(source="/videos/clip.mp4", masks=np.zeros((2, 3))))
+    with pytest.raises(PhysposeError, match=r"masks has shape \(2, 3\)") as caught:
+        load_keypoints(path)
+    assert caught.value.path == str(path)
+
+
 def test_unreadable_containers(tmp_path):
     (tmp_path / "kp.json").write_text("{not json")
     with pytest.raises(PhysposeError, match="not valid JSON"):
