@@ -82,7 +82,8 @@ def _materials(args: argparse.Namespace) -> tuple[list[Material], list[str]]:
         if m.kind == "multiview":
             find_multiview_files(m.path)  # layout errors before any long work
         elif not m.path.is_file():
-            raise PhysposeError(f"{m.kind} input is not a file", path=m.path)
+            raise PhysposeError(f"{m.kind} input is not a file", path=m.path,
+                                remedy="pass a file; a pose2sim folder goes with --multiview")
     if given:
         return given, []
     found, skipped = shared_material()

@@ -305,7 +305,9 @@ def find_asf(amc_path: str | Path, asf: str | Path | None = None) -> Path:
         return candidates[0]
     found = "none" if not candidates else ", ".join(c.name for c in candidates)
     raise PhysposeError(f"cannot tell which ASF skeleton belongs to this AMC (found {found})",
-                        path=amc_path, remedy="pass the skeleton explicitly (asf=...)")
+                        path=amc_path,
+                        remedy="name the .asf as the .amc is named (walk.asf for walk_01.amc), "
+                               "or keep one .asf in its folder (from Python: asf=...)")
 
 
 CMU_AMC_FPS = 120.0  # Hz; AMC files carry no rate, CMU captured at 120 Hz

@@ -43,7 +43,8 @@ def find_character(clip_path: Path, character: str | Path | None = None) -> Path
         return found[0]
     raise PhysposeError(f"cannot tell which character file belongs to this clip (found "
                         f"{[f.name for f in found] or 'none'})", path=clip_path,
-                        remedy="put character_<name>.txt beside the clip or pass character=")
+                        remedy="put character_<name>.txt beside the clip, or keep one "
+                               "character file in its folder (from Python: character=...)")
 
 
 def _read_json(path: Path) -> dict:
