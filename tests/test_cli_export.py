@@ -53,6 +53,10 @@ def test_report(results, capsys):
     (["overlay", "{missing}"], "result folder not found"),
     (["overlay", "{physics}", "--video", "{missing}/v.mp4"], "file not found"),
     (["overlay", "{physics}", "--png-frame", "99"], "outside the result"),
+    (["overlay", "{physics}", "--out", "{empty}"], "--out is a folder"),
+    (["overlay", "{physics}", "--out", "{empty}/o.txt"], "--out does not end in .mp4"),
+    (["overlay", "{physics}", "--png-frame", "0", "--out", "{empty}/o.mp4"],
+     "--out does not end in .png"),
 ])
 def test_bad_input_gives_a_message_and_exit_2(results, tmp_path, capsys, argv, message):
     (tmp_path / "empty").mkdir()

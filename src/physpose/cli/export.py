@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from physpose.errors import PhysposeError
 from physpose.export import DEFAULT_NAMES, FORMATS, export
 from physpose.render.result import MOTIONS
 
@@ -73,6 +74,8 @@ def _run_report(args: argparse.Namespace) -> int:
 def _run_overlay(args: argparse.Namespace) -> int:
     from physpose.render.overlay import render_overlay, save_overlay_png
 
+    if args.out is not None:
+        _check_file_out(args.out, ".png" if args.png_frame is not None else ".mp4")
     if args.png_frame is not None:
         out = args.out if args.out is not None else args.result / f"overlay_{args.png_frame}.png"
         print(save_overlay_png(args.result, args.png_frame, out, video=args.video))
@@ -80,3 +83,13 @@ def _run_overlay(args: argparse.Namespace) -> int:
     made = render_overlay(args.result, args.out, video=args.video, progress=True)
     print(f"{made.path} (drawn on {made.background})")
     return 0
+
+
+def _check_file_out(out: Path, suffix: str) -> None:
+    """--out names a file of the kind written (checked before the frames are drawn)."""
+    if out.is_dir():
+        raise PhysposeError("--out is a folder; it names the file to write", path=out,
+                            remedy=f"pass a file name ending in {suffix}")
+    if out.suffix.lower() != suffix:
+        raise PhysposeError(f"--out does not end in {suffix}", path=out,
+                            remedy=f"pass a file name ending in {suffix}")
