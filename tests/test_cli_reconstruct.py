@@ -89,6 +89,9 @@ def test_time_range_on_keypoints_is_refused(tmp_path, capsys):
     assert "apply to videos" in capsys.readouterr().err
     assert main(["reconstruct", str(keys), "--out", str(tmp_path / "o"), "--person", "1,2"]) == 2
     assert "apply to videos" in capsys.readouterr().err
+    for option in (["--fps", "10"], ["--static-camera"]):  # had been ignored
+        assert main(["reconstruct", str(keys), "--out", str(tmp_path / "o"), *option]) == 2
+        assert "apply to videos" in capsys.readouterr().err
 
 
 def test_flags_make_the_pipeline_config():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 
@@ -145,6 +146,14 @@ def test_text_file_named_like_a_video(tmp_path):
     (tmp_path / "fake.mp4").write_text("this is not a video\n" * 50)
     with pytest.raises(PhysposeError, match="cannot open this file as a video"):
         probe(tmp_path / "fake.mp4")
+
+
+@pytest.mark.skipif(os.geteuid() == 0, reason="root reads any file")
+def test_a_video_without_read_permission_is_not_called_corrupt(tmp_path):
+    path = make_video(tmp_path / "locked.mp4", 3)
+    path.chmod(0)
+    with pytest.raises(PhysposeError, match="no permission to read"):
+        probe(path)
 
 
 def test_empty_file(tmp_path):

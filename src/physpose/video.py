@@ -10,6 +10,7 @@ stage warns where the container's own times say otherwise: `timing_drift`).
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -64,6 +65,9 @@ def _open(path: Path) -> cv2.VideoCapture:
     cap = cv2.VideoCapture(str(path), cv2.CAP_FFMPEG)
     if not cap.isOpened():
         cap.release()
+        if path.is_file() and not os.access(path, os.R_OK):
+            raise PhysposeError("no permission to read this file", path=path,
+                                remedy="check its permissions (chmod u+r)")
         raise PhysposeError("cannot open this file as a video (no frames, corrupt, truncated "
                             "or an unsupported codec)", path=path, remedy=_REENCODE)
     # Phone videos are often stored landscape with a rotation tag that players apply; OpenCV

@@ -15,7 +15,8 @@ from physpose import diagnostics
 from physpose.dynamics import PRESETS
 from physpose.dynamics.objective import TERMS, ObjectiveWeights
 from physpose.dynamics.travel import CAMERA_SETTINGS
-from physpose.cli.observe import PERSON_HELP, STATIC_CAMERA_HELP, image_point
+from physpose.cli.observe import (PERSON_HELP, STATIC_CAMERA_HELP, image_point,
+                                  video_options_given)
 from physpose.errors import PhysposeError
 from physpose.export import FORMATS
 from physpose.keypoints_io import is_keypoints_file
@@ -247,10 +248,10 @@ def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:
     if is_keypoints_file(video):
         if not video.is_file():
             raise PhysposeError("keypoints file not found", path=video, remedy="check the path")
-        o = config.observe
-        if (o.start, o.end, o.person) != (None, None, None):
-            raise PhysposeError("--start/--end/--person apply to videos, not to precomputed keypoints",
-                                path=video, remedy="drop them, or cut the keypoints file")
+        if video_options_given(config.observe):
+            raise PhysposeError("--fps/--start/--end/--person/--static-camera apply to videos, "
+                                "not to precomputed keypoints", path=video,
+                                remedy="drop them, or cut the keypoints file")
         return None
     info = videolib.probe(video)
     observe = config.footage_observe()
