@@ -119,6 +119,18 @@ def test_compare_errors_name_the_file_and_the_remedy(tmp_path, capsys):
     junk.write_text(json.dumps({"results": [{"variant": "base"}]}))  # a record without its clip
     assert main(["compare", str(junk), "--base", "base"]) == 2
     assert "not a benchmark results file" in capsys.readouterr().err
+    record = {"kind": "mocap", "clip": "a", "variant": "base", "metrics": {}}
+    for broken in ({"metrics": [1, 2]}, {"variant": 1}, {"clip": ["a"]}):
+        junk.write_text(json.dumps({"results": [dict(record, **broken)]}))
+        assert main(["compare", str(junk), "--base", "base"]) == 2
+        err = capsys.readouterr().err
+        assert "not a benchmark results file" in err and "Traceback" not in err
+    junk.write_text(json.dumps({"results": [record], "config": "hello"}))
+    assert main(["compare", str(junk), "--base", "base"]) == 2
+    assert "its config is not an object" in capsys.readouterr().err
+    junk.write_text(json.dumps({"results": []}))
+    assert main(["compare", str(junk), "--base", "base"]) == 2
+    assert "holds no results" in capsys.readouterr().err
     only = _run(tmp_path, "only", ("base",), [r for r in _results() if r["variant"] != "new"])
     assert main(["compare", str(only), "--base", "base"]) == 2
     assert "nothing to compare" in capsys.readouterr().err

@@ -88,11 +88,28 @@ def load_results(path: str | Path) -> dict:
         raise PhysposeError(f"not a benchmark results file ({err})", path=path,
                             remedy="pass the results.json that `physpose benchmark` wrote") from err
     records = doc.get("results") if isinstance(doc, dict) else None
-    if not isinstance(records, list) or not all(
-            isinstance(r, dict) and {"kind", "clip", "variant"} <= r.keys() for r in records):
-        raise PhysposeError("not a benchmark results file (no per-clip results)", path=path,
+    if not isinstance(records, list) or not all(map(_is_record, records)):
+        raise PhysposeError("not a benchmark results file (no per-clip results, or one whose "
+                            "kind, clip, variant or metrics are not what the benchmark writes)",
+                            path=path,
                             remedy="pass the results.json that `physpose benchmark` wrote")
+    if not records:
+        raise PhysposeError("this benchmark run holds no results (every clip failed or was "
+                            "skipped)", path=path, remedy="pass the results of a run that scored "
+                                                          "clips")
+    if not isinstance(doc.get("config", {}), dict):
+        raise PhysposeError("not a benchmark results file (its config is not an object)",
+                            path=path, remedy="pass the results.json that `physpose benchmark` "
+                                              "wrote")
     return doc
+
+
+def _is_record(record) -> bool:
+    """A per-clip result as the benchmark writes it: kind, clip and variant names and a
+    metrics object."""
+    return isinstance(record, dict) and all(
+        isinstance(record.get(k), str) for k in ("kind", "clip", "variant")) \
+        and isinstance(record.get("metrics", {}), dict)
 
 
 def merge_results(docs: list[dict], labels: list[str] | None = None) -> list[dict]:
