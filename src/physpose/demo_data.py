@@ -52,7 +52,8 @@ def ensure_sports2d_demo(root: Path | None = None, *, quiet: bool = False) -> Pa
 def _ensure(package: str, version: str, prefix: str, wanted: tuple[str, ...], root: Path,
             what: str, quiet: bool) -> Path:
     marker = root / _MARKER
-    if marker.is_file() and marker.read_text().strip() == version:
+    if marker.is_file() and marker.read_text().strip() == version \
+            and all((root / rel).is_file() for rel in wanted):  # a file deleted since: fetch
         return root
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "pip", "download", "--no-deps", "--disable-pip-version-check",
