@@ -144,6 +144,17 @@ def test_confidence_outside_unit_interval(tmp_path):
     assert "frame 2" in text and "confidence 95 is outside [0, 1]" in text
 
 
+def test_keypoints_far_outside_the_image_are_refused(tmp_path):
+    doc = _doc()
+    kp = np.array(doc["keypoints2d"])
+    kp[3, 5, :2] = [1e12, 100.0]
+    assert "frame 3" in _error(tmp_path, _doc(keypoints2d=kp.tolist()))
+    assert "more than a picture away" in _error(tmp_path, _doc(keypoints2d=kp.tolist()))
+    kp[3, 5, 2] = 0.0  # not found: its coordinates do not matter
+    kp[2, 0, :2] = [-100.0, 400.0]  # a little outside the 320 x 240 picture
+    load_keypoints(_write_json(tmp_path, _doc(keypoints2d=kp.tolist())))
+
+
 def test_timestamps_must_increase(tmp_path):
     text = _error(tmp_path, _doc(timestamps=[0, 0.1, 0.2, 0.2, 0.3, 0.4]))
     assert "frame 3" in text and "not strictly increasing" in text
