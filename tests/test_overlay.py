@@ -118,6 +118,13 @@ def test_bad_inputs_are_clear_errors(result_with_video, tmp_path):
         render_overlay(folder, out=tmp_path / "o.mp4", video=short, cfg=CFG)
     with pytest.raises(PhysposeError, match="outside the result"):
         save_overlay_png(folder, Reconstruction.load(folder).num_frames, tmp_path / "x.png")
+    # Another video than the one the result was made from, told by its size.
+    other = tmp_path / "other"
+    rec = Reconstruction.load(folder)
+    rec.replace(meta={**rec.meta, "image_size": [IMAGE_SIZE[0] * 2, IMAGE_SIZE[1] * 2]}).save(
+        other / "reconstruction.npz")
+    with pytest.raises(PhysposeError, match=f"the video is {IMAGE_SIZE[0]}x{IMAGE_SIZE[1]}"):
+        save_overlay_png(other, 0, tmp_path / "x.png")
 
 
 def test_the_ground_force_is_an_arrow_from_each_loaded_foot(tmp_path):

@@ -246,6 +246,11 @@ def _frames(rec: Reconstruction, video: str | Path | None) -> tuple[Iterator, tu
                           and path.suffix.lower() in videolib.VIDEO_EXTENSIONS):
         return iter([None] * rec.num_frames), size, "plain background (no source video found)"
     info = videolib.probe(path)
+    recorded = rec.meta.get("image_size")
+    if recorded is not None and tuple(map(int, recorded)) != (info.width, info.height):
+        raise PhysposeError(f"the video is {info.width}x{info.height} pixels, the result was "
+                            f"made from {int(recorded[0])}x{int(recorded[1])}", path=path,
+                            remedy="pass the video this result was made from (--video)")
     indices = rec.meta.get("frame_indices")
     if indices is None or len(indices) != rec.num_frames:
         # Seconds into the footage (the result's own clock is the real one).
