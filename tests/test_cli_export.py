@@ -71,3 +71,10 @@ def test_unknown_format_is_rejected_by_the_parser(results, capsys):
         main(["export", str(results["physics"]), "--format", "fbx"])
     assert exit_.value.code == 2
     assert "invalid choice: 'fbx'" in capsys.readouterr().err
+
+
+def test_a_problem_found_in_the_result_names_its_file(results, capsys):
+    """Checks deep in an export know the data, not the file; the command names the file."""
+    assert main(["export", str(results["kinematic"]), "-f", "forces"]) == 2
+    err = capsys.readouterr().err
+    assert f"{results['kinematic'] / 'reconstruction.npz'}: this result holds no simulated" in err

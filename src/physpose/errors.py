@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 
@@ -27,3 +29,15 @@ class PhysposeError(Exception):
         if remedy:
             text += " " + remedy.rstrip(".") + "."
         super().__init__(text)
+
+
+@contextmanager
+def about(path: str | Path) -> Iterator[None]:
+    """A PhysposeError raised inside that names no file is about ``path`` (a check deep in a
+    stage knows the data, not the file it came from)."""
+    try:
+        yield
+    except PhysposeError as exc:
+        if exc.path is not None:
+            raise
+        raise PhysposeError(exc.problem, path=path, frame=exc.frame, remedy=exc.remedy) from None

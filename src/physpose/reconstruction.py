@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physpose.errors import PhysposeError
+from physpose.errors import PhysposeError, about
 from physpose.joints import NUM_LANDMARKS
 from physpose.npz_io import read_npz, write_npz
 from physpose.skeleton import NUM_DOF
@@ -196,10 +196,5 @@ class Reconstruction:
         except json.JSONDecodeError as exc:
             raise PhysposeError(f"its metadata is not JSON ({exc})", path=path,
                                 remedy="re-run the reconstruction") from None
-        try:
+        with about(path):  # a field of the wrong shape: say which file holds it
             return cls(meta=meta, **fields)
-        except PhysposeError as exc:  # a field of the wrong shape: say which file holds it
-            if exc.path is not None:
-                raise
-            raise PhysposeError(exc.problem, path=path, remedy=exc.remedy
-                                or "re-run the reconstruction with this physpose version") from None

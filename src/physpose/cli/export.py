@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from physpose.errors import PhysposeError
+from physpose.errors import PhysposeError, about
 from physpose.export import DEFAULT_NAMES, FORMATS, export
 from physpose.render.result import MOTIONS
 
@@ -60,14 +60,16 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_export(args: argparse.Namespace) -> int:
-    print(export(args.result, args.fmt, args.out, motion=args.motion))
+    with about(_result_file(args.result)):
+        print(export(args.result, args.fmt, args.out, motion=args.motion))
     return 0
 
 
 def _run_report(args: argparse.Namespace) -> int:
     from physpose.report import build_report
 
-    print(build_report(args.result, args.out))
+    with about(_result_file(args.result)):
+        print(build_report(args.result, args.out))
     return 0
 
 
@@ -76,13 +78,20 @@ def _run_overlay(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         _check_file_out(args.out, ".png" if args.png_frame is not None else ".mp4")
-    if args.png_frame is not None:
-        out = args.out if args.out is not None else args.result / f"overlay_{args.png_frame}.png"
-        print(save_overlay_png(args.result, args.png_frame, out, video=args.video))
-        return 0
-    made = render_overlay(args.result, args.out, video=args.video, progress=True)
+    with about(_result_file(args.result)):
+        if args.png_frame is not None:
+            out = args.out if args.out is not None else \
+                args.result / f"overlay_{args.png_frame}.png"
+            print(save_overlay_png(args.result, args.png_frame, out, video=args.video))
+            return 0
+        made = render_overlay(args.result, args.out, video=args.video, progress=True)
     print(f"{made.path} (drawn on {made.background})")
     return 0
+
+
+def _result_file(result: Path) -> Path:
+    """The file a result's problems are reported against."""
+    return result / "reconstruction.npz" if result.is_dir() else result
 
 
 def _check_file_out(out: Path, suffix: str) -> None:
