@@ -9,6 +9,7 @@ import pytest
 
 import physpose.report as report
 from physpose.errors import PhysposeError
+from physpose.reconstruction import Reconstruction
 from physpose.report import build_report
 from physpose.report.data import (forces_summary, grf_plot, report_data, summary_rows,
                                   window_losses)
@@ -56,6 +57,18 @@ def test_kinematic_only_result_without_body_draws_a_skeleton(tmp_path):
     assert len(data["edges"]) == 22
     # Plots of what is present only: no physics gap, no centre of mass, no losses.
     assert [p["id"] for p in data["plots"]] == ["feet"]
+
+
+@needs_bundle
+def test_a_result_with_positions_that_are_not_numbers_is_an_error(tmp_path):
+    folder = save_result(tmp_path, num_frames=6, physics=False, qpos_kinematic=False, meta={})
+    rec = Reconstruction.load(folder)
+    joints = rec.joints_kinematic.copy()
+    joints[3, 2] = float("nan")
+    rec.replace(joints_kinematic=joints).save(folder / "reconstruction.npz")
+    with pytest.raises(PhysposeError, match="positions that are not numbers") as caught:
+        build_report(folder)
+    assert caught.value.path == str(folder / "reconstruction.npz")
 
 
 @needs_bundle

@@ -36,6 +36,12 @@ def build_report(result_dir: str | Path, out_html: str | Path | None = None,
     out = Path(out_html) if out_html is not None else folder / DEFAULT_NAME
     title = f"physpose · {folder.name}"
     data = report_data(rec, title=title)
+    try:
+        data_json = json.dumps(data, separators=(",", ":"), allow_nan=False)
+    except ValueError:  # the viewer draws numbers only
+        raise PhysposeError("the result holds positions that are not numbers (NaN or infinity)",
+                            path=folder / "reconstruction.npz",
+                            remedy="re-run the reconstruction") from None
     columns, rows = metric_rows(rec, metrics)
     page = Template((ASSETS / "template.html").read_text()).substitute(
         version=__version__, title=html.escape(title),
@@ -46,7 +52,7 @@ def build_report(result_dir: str | Path, out_html: str | Path | None = None,
         summary=_table(["", ""], [list(r) for r in summary_rows(rec, folder)], header=False),
         metrics=_table(["metric"] + columns, rows) if rows else
         "<p class=\"hint\">No metrics stored with this result.</p>",
-        data=_script_safe(json.dumps(data, separators=(",", ":"), allow_nan=False)),
+        data=_script_safe(data_json),
         script=_script_safe(BUNDLE.read_text()))
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(page)
