@@ -63,6 +63,7 @@ def test_absurd_target_rate_is_rejected(target):
 @pytest.mark.parametrize("start,end,match", [
     (5.0, None, "start 5 s is outside"), (-1.0, None, "start -1 s is outside"),
     (0.5, 0.2, "must be after start"), (0.0, 3.0, "past the end"),
+    (0.0, float("inf"), "end inf s is not a time"), (0.0, float("nan"), "end nan s is not"),
 ])
 def test_time_range_outside_the_video_is_rejected(start, end, match):
     with pytest.raises(PhysposeError, match=match):

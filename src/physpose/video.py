@@ -128,7 +128,10 @@ def plan_frames(info: VideoInfo, target_fps: float = 25.0, start: float | None =
     if not (math.isfinite(t0) and 0 <= t0 < duration):
         raise PhysposeError(f"start {t0:g} s is outside the video (0-{duration:.3f} s)",
                             path=info.path, remedy="pick a start time inside the video")
-    if not math.isfinite(t1) or t1 <= t0:
+    if not math.isfinite(t1):
+        raise PhysposeError(f"end {t1:g} s is not a time", path=info.path,
+                            remedy="pick an end time in seconds inside the video, or omit it")
+    if t1 <= t0:
         raise PhysposeError(f"end {t1:g} s must be after start {t0:g} s", path=info.path,
                             remedy="pick an end time after the start")
     if t1 > duration + 0.5 / info.fps:
