@@ -147,11 +147,11 @@ def test_confidence_outside_unit_interval(tmp_path):
 def test_keypoints_far_outside_the_image_are_refused(tmp_path):
     doc = _doc()
     kp = np.array(doc["keypoints2d"])
-    kp[3, 5, :2] = [1e12, 100.0]
+    kp[3, 5] = [1e12, 100.0, 0.9]
     assert "frame 3" in _error(tmp_path, _doc(keypoints2d=kp.tolist()))
     assert "more than a picture away" in _error(tmp_path, _doc(keypoints2d=kp.tolist()))
-    kp[3, 5, 2] = 0.0  # not found: its coordinates do not matter
-    kp[2, 0, :2] = [-100.0, 400.0]  # a little outside the 320 x 240 picture
+    kp[3, 5, 2] = 1e-5  # MediaPipe's guess at an ankle out of view: far, but not sure
+    kp[2, 0] = [-100.0, 400.0, 0.9]  # sure, a little outside the 320 x 240 picture
     load_keypoints(_write_json(tmp_path, _doc(keypoints2d=kp.tolist())))
 
 

@@ -21,6 +21,7 @@ from physpose.observations import CAMERA_MOTIONS, Observations
 
 KEYPOINTS_EXTENSIONS = (".json", ".npz")
 _DOC = "see docs/keypoints_format.md"
+SURE_CONFIDENCE = 0.5  # a keypoint at least this sure must lie in the picture or near it
 _REQUIRED = ("fps", "image_size", "keypoints2d")
 _OPTIONAL = ("world_landmarks", "camera_K", "timestamps", "detected", "interpolated",
              "frame_indices", "masks", "source", "landmark_names", "format_version", "format",
@@ -134,17 +135,17 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
         f = int(np.argmax(out.any(axis=1)))
         fail(f"keypoint confidence {conf[f][out[f]][0]:g} is outside [0, 1]",
              "scale confidences to [0, 1]", f)
-    # A detector places a joint it cannot see a little outside the picture, never a whole
-    # picture away from it: such coordinates are in other units.
-    far = (conf > 0) & ((kp[..., 0] < -size[0]) | (kp[..., 0] > 2 * size[0])
-                        | (kp[..., 1] < -size[1]) | (kp[..., 1] > 2 * size[1]))
+    # A joint the detector is sure of lies in the picture or near it, never a whole picture
+    # away (MediaPipe guesses joints out of view far away, but with a visibility near 0).
+    far = (conf >= SURE_CONFIDENCE) & ((kp[..., 0] < -size[0]) | (kp[..., 0] > 2 * size[0])
+                                       | (kp[..., 1] < -size[1]) | (kp[..., 1] > 2 * size[1]))
     if far.any():
         f = int(np.argmax(far.any(axis=1)))
         x, y = kp[f][far[f]][0, :2]
-        fail(f"keypoint at ({x:g}, {y:g}) px lies more than a picture away from the "
-             f"{int(size[0])}x{int(size[1])} image",
-             "give x and y in pixels of the video's frames (origin top left), or confidence 0 "
-             "for a keypoint that was not found", f)
+        fail(f"a keypoint of confidence {SURE_CONFIDENCE:g} or more lies at ({x:g}, {y:g}) px, "
+             f"more than a picture away from the {int(size[0])}x{int(size[1])} image",
+             "give x and y in pixels of the video's frames (origin top left), and a low "
+             "confidence to a keypoint that was guessed", f)
 
     per_frame: dict[str, np.ndarray | None] = {}
     for key, shape in (("world_landmarks", (t, NUM_LANDMARKS, 3)), ("timestamps", (t,)),
