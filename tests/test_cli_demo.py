@@ -18,3 +18,18 @@ def test_demo_reconstructs_the_builtin_clip_and_says_where_the_report_is(pose2si
         assert (out / name).is_file(), name
     rec = Reconstruction.load(out)
     assert rec.has_physics and rec.num_frames == 42
+
+
+def test_demo_refuses_an_output_it_could_not_write_before_any_work(tmp_path, capsys,
+                                                                    monkeypatch):
+    import physpose.cli.demo as demo
+
+    def no_work():
+        raise AssertionError("the demo started its work")
+
+    monkeypatch.setattr(demo, "ensure_pose2sim_demo", no_work)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    assert main(["demo", "--out", str(blocker)]) == 2
+    err = capsys.readouterr().err
+    assert "is not a folder" in err and "Traceback" not in err

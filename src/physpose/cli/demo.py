@@ -10,7 +10,9 @@ from pathlib import Path
 
 from physpose.cli.reconstruct import finish, load_input, print_summary
 from physpose.demo_data import ensure_pose2sim_demo
+from physpose.errors import PhysposeError
 from physpose.outputs import DEFAULT_FORMATS
+from physpose.paths import check_output_folder
 from physpose.pipeline import RECONSTRUCTION_FILE, PipelineConfig
 
 DEMO_VIEW = "videos/cam01.mp4"  # the view the demo reconstructs (of the four calibrated ones)
@@ -47,6 +49,7 @@ def _run(args: argparse.Namespace) -> int:
     from physpose.pipeline import reconstruct  # noqa: PLC0415 (heavy imports)
 
     start = time.perf_counter()
+    check_output_folder(args.out)
     video = ensure_pose2sim_demo() / DEMO_VIEW
     print(f"demo input: {video}", flush=True)
     config = PipelineConfig.preset("fast")
@@ -62,6 +65,8 @@ def _run(args: argparse.Namespace) -> int:
         recon = reconstruct(obs, args.out, config, resume=not args.no_cache, progress=True)
         timings.update({k: v for k, v in recon.meta.get("timings_s", {}).items()
                         if k != "observe"})
+    except PhysposeError:
+        raise  # the user's to fix (a path, the input), not a failure of the physics
     except Exception as exc:  # noqa: BLE001 (reported in full; the kinematic result is kept)
         traceback.print_exc(file=sys.stderr)
         print(f"\ndemo: the physics stage FAILED ({type(exc).__name__}: {exc}); writing the "
