@@ -265,6 +265,16 @@ def test_a_damaged_checkpoint_is_optimised_again(clip, tmp_path, caplog):
     assert checkpoint.load_window(folder, 1) is not None  # written again
 
 
+def test_checkpoints_that_cannot_be_written_cost_only_the_resumption(clip, tmp_path, caplog):
+    whole = run(clip, checkpoints=False)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    with caplog.at_level("WARNING", logger="physpose.dynamics.checkpoint"):
+        res = run(clip, checkpoint_dir=blocker)
+    assert "cannot write this window's checkpoint" in caplog.text
+    np.testing.assert_array_equal(res.qpos, whole.qpos)
+
+
 def test_independent_windows_are_blended(clip):
     res = run(clip, dataclasses.replace(TINY, independent=True), checkpoints=False)
     assert np.isfinite(res.qpos).all() and np.isfinite(res.grf).all()

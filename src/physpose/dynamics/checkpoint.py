@@ -38,12 +38,21 @@ def window_path(folder: Path, index: int) -> Path:
     return folder / f"window_{index:03d}.npz"
 
 
-def save_window(folder: Path, index: int, arrays: dict[str, np.ndarray], record: dict) -> Path:
-    """Write one finished window atomically (arrays plus a JSON record)."""
+def save_window(folder: Path, index: int, arrays: dict[str, np.ndarray], record: dict
+                ) -> Path | None:
+    """Write one finished window atomically (arrays plus a JSON record). A folder that cannot
+    be written (a file in the way, no permission, a full disk) costs only the resumption:
+    logged, and None returned."""
     path = window_path(folder, index)
-    with atomic_path(path) as tmp, tmp.open("wb") as fh:
-        np.savez(fh, record_json=np.array(json.dumps(record)),
-                 **{k: np.asarray(v) for k, v in arrays.items()})
+    try:
+        with atomic_path(path) as tmp, tmp.open("wb") as fh:
+            np.savez(fh, record_json=np.array(json.dumps(record)),
+                     **{k: np.asarray(v) for k, v in arrays.items()})
+    except OSError as exc:
+        _log.warning("%s: cannot write this window's checkpoint (%s); the run goes on, but "
+                     "an interruption would start it again. for the benchmark, set "
+                     "PHYSPOSE_CACHE_DIR to a folder you may write to", path, exc.strerror or exc)
+        return None
     return path
 
 
