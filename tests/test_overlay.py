@@ -124,7 +124,11 @@ def test_bad_inputs_are_clear_errors(result_with_video, tmp_path):
     rec.replace(meta={**rec.meta, "image_size": [IMAGE_SIZE[0] * 2, IMAGE_SIZE[1] * 2]}).save(
         other / "reconstruction.npz")
     with pytest.raises(PhysposeError, match=f"the video is {IMAGE_SIZE[0]}x{IMAGE_SIZE[1]}"):
-        save_overlay_png(other, 0, tmp_path / "x.png")
+        save_overlay_png(other, 0, tmp_path / "x.png", video=rec.meta["source"])
+    # The recorded video, found by itself: a plain background, so that a run's last step
+    # (its overlay) does not fail on a video changed since.
+    made = render_overlay(other, out=tmp_path / "o.mp4", cfg=CFG)
+    assert made.background.startswith("plain background")
 
 
 def test_the_ground_force_is_an_arrow_from_each_loaded_foot(tmp_path):

@@ -248,6 +248,9 @@ def _frames(rec: Reconstruction, video: str | Path | None) -> tuple[Iterator, tu
     info = videolib.probe(path)
     recorded = rec.meta.get("image_size")
     if recorded is not None and tuple(map(int, recorded)) != (info.width, info.height):
+        if not given:  # the recorded video has changed since: draw without it
+            return iter([None] * rec.num_frames), size, \
+                f"plain background ({path} is now {info.width}x{info.height} pixels)"
         raise PhysposeError(f"the video is {info.width}x{info.height} pixels, the result was "
                             f"made from {int(recorded[0])}x{int(recorded[1])}", path=path,
                             remedy="pass the video this result was made from (--video)")
