@@ -114,6 +114,14 @@ def _damage(path, how):
             arrays["meta_json"] = np.array("{not json")
         elif how == "fps 0":
             arrays["fps"] = np.array(0.0)
+        elif how == "fps two numbers":
+            arrays["fps"] = np.array([25.0, 30.0])
+        elif how == "fps text":
+            arrays["fps"] = np.array("fast")
+        elif how == "meta a list":
+            arrays["meta_json"] = np.array("[1, 2]")
+        elif how == "joints 0-d":
+            arrays["joints_kinematic"] = np.array(1.0)
         elif how == "a field of the wrong shape":
             arrays["landmarks_kinematic"] = arrays["landmarks_kinematic"][:, :5]
         np.savez(path, **arrays)
@@ -123,7 +131,11 @@ def _damage(path, how):
     ("truncated", "not a readable reconstruction npz"),
     ("empty", "not a readable reconstruction npz"),
     ("meta not JSON", "its metadata is not JSON"),
-    ("fps 0", "frame rate 0 is not a positive number"),
+    ("fps 0", "frame rate 0.0 is not a positive, finite number"),
+    ("fps two numbers", r"frame rate \[25.0, 30.0\] is not"),
+    ("fps text", "frame rate 'fast' is not"),
+    ("meta a list", "metadata is not a JSON object"),
+    ("joints 0-d", "not arrays of the right dimensions"),
     ("a field of the wrong shape", "landmarks_kinematic has shape"),
 ])
 def test_a_damaged_reconstruction_is_named_in_the_error(tmp_path, how, message):

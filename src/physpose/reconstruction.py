@@ -184,17 +184,25 @@ class Reconstruction:
             raise PhysposeError(f"reconstruction lacks keys {missing}", path=path,
                                 remedy="re-run the reconstruction with this physpose version")
         fields = {k: d[k] for k in _REQUIRED + _OPTIONAL if k in d}
-        fields["fps"] = float(fields["fps"])
-        if not (np.isfinite(fields["fps"]) and fields["fps"] > 0):
-            raise PhysposeError(f"frame rate {fields['fps']:g} is not a positive number",
-                                path=path, remedy="re-run the reconstruction")
+
+        def damaged(problem: str) -> PhysposeError:
+            return PhysposeError(problem, path=path, remedy="re-run the reconstruction")
+
+        fps = fields["fps"]
+        if fps.shape != () or fps.dtype.kind not in "iuf" or not (np.isfinite(fps) and fps > 0):
+            raise damaged(f"its frame rate {fps.tolist()!r} is not a positive, finite number")
+        fields["fps"] = float(fps)
+        if fields["joint_names"].ndim != 1 or fields["joints_kinematic"].ndim != 3:
+            raise damaged("its joint names or kinematic joints are not arrays of the right "
+                          "dimensions")
         fields["joint_names"] = tuple(str(n) for n in fields["joint_names"])
         if "body_mjcf" in fields:
             fields["body_mjcf"] = str(fields["body_mjcf"])
         try:
             meta = json.loads(str(d["meta_json"])) if "meta_json" in d else {}
         except json.JSONDecodeError as exc:
-            raise PhysposeError(f"its metadata is not JSON ({exc})", path=path,
-                                remedy="re-run the reconstruction") from None
+            raise damaged(f"its metadata is not JSON ({exc})") from None
+        if not isinstance(meta, dict):
+            raise damaged("its metadata is not a JSON object")
         with about(path):  # a field of the wrong shape: say which file holds it
             return cls(meta=meta, **fields)
