@@ -45,6 +45,9 @@ def test_metrics_table_has_one_column_per_motion():
     header, row = table.splitlines()
     assert header.split()[-2:] == ["kinematic", "physics"]
     assert row.split()[-2:] == ["12.5", "0"]
+    # metrics.json writes a NaN as null, which reads back as None: shown as "-"
+    _, row = metrics_table({"kinematic": {"float_pct": None}}).splitlines()
+    assert row.split()[-1] == "-"
 
 
 def test_write_outputs_writes_every_file(tmp_path):

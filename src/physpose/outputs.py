@@ -76,8 +76,8 @@ def metrics_table(metrics: dict[str, dict[str, float]]) -> str:
     lines = [f"  {'metric':<{width}}" + "".join(f"{m:>12}" for m in motions)]
     for key, label in METRIC_LABELS.items():
         if any(key in metrics[m] for m in motions):
-            cells = "".join(f"{metrics[m][key]:>12.3g}" if key in metrics[m] else f"{'-':>12}"
-                            for m in motions)
+            cells = "".join(f"{metrics[m][key]:>12.3g}" if metrics[m].get(key) is not None
+                            else f"{'-':>12}" for m in motions)  # null: not a number
             lines.append(f"  {label:<{width}}{cells}")
     return "\n".join(lines)
 

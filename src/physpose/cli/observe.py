@@ -60,9 +60,10 @@ def run_observe(source: str | Path, out_dir: str | Path, cfg: ObserveConfig = Ob
     source, out_dir = Path(source), Path(out_dir)
     keypoints = is_keypoints_file(source)
     if keypoints and video_options_given(cfg):
-        raise PhysposeError("--fps/--start/--end/--person apply to videos, not to precomputed keypoints",
-                            path=source, remedy="drop those options, or resample the keypoints "
-                                                "before writing them")
+        raise PhysposeError("--fps/--start/--end/--person/--static-camera apply to videos, not "
+                            "to precomputed keypoints", path=source,
+                            remedy="drop those options, or resample the keypoints before "
+                                   "writing them")
     check_output_folder(out_dir)
     obs = load_keypoints(source) if keypoints else observe(source, cfg, progress=progress)
     out_dir.mkdir(parents=True, exist_ok=True)
