@@ -267,8 +267,9 @@ def test_the_depth_term_holds_the_root_along_the_line_of_sight(stepping):
 
 
 def test_the_image_term_projects_through_a_skewed_camera(stepping):
-    """The refinement projects as the search's objective does, skew included: zero cost on the
-    exact projections, and a gradient that matches the cost's finite differences."""
+    """The refinement projects as the search's objective does, skew and a travelling camera
+    included: zero cost on the exact projections, and a gradient that matches the cost's
+    finite differences."""
     from physpose.dynamics.ilqr import ImageTerm, _Problem  # noqa: PLC0415
     from physpose.dynamics.objective import project  # noqa: PLC0415
     from physpose.dynamics.synthetic import virtual_camera  # noqa: PLC0415
@@ -279,11 +280,12 @@ def test_the_image_term_projects_through_a_skewed_camera(stepping):
     K[0, 1] = 0.3 * K[0, 0]  # a strong skew, so that leaving it out shows
     sites = sim.body.landmark_site_ids
     steps = np.arange(8, len(truth), 8)
-    uv = project(_landmarks(sim, truth[steps]), K, T)
+    travel = np.outer(np.arange(len(steps)), [0.02, -0.01, 0.005])  # the camera moving along
+    uv = project(_landmarks(sim, truth[steps]) - travel[:, None], K, T)
     image = ImageTerm(steps=steps, keypoints=np.concatenate([uv, np.ones(uv.shape[:-1] + (1,))],
                                                             axis=-1),
                       metres_per_px=np.full(len(steps), 0.004), K=K, T_world2cam=T,
-                      site_ids=sites)
+                      site_ids=sites, camera_travel=travel)
     qpos, qvel = truth[:, 1:1 + NQ], truth[:, 1 + NQ:1 + NQ + NV]
     problem = _Problem(sim.model, state0, qpos, qvel, targets, RefineConfig(image=3e3),
                        image=image)
