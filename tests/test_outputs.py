@@ -148,4 +148,4 @@ def test_a_damaged_reconstruction_is_named_in_the_error(tmp_path, how, message):
     _damage(path, how)
     with pytest.raises(PhysposeError, match=message) as caught:
         Reconstruction.load(tmp_path)
-    assert caught.value.path == str(path)
+    assert caught.value.path == str(path) and caught.value.remedy

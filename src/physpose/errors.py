@@ -32,12 +32,13 @@ class PhysposeError(Exception):
 
 
 @contextmanager
-def about(path: str | Path) -> Iterator[None]:
+def about(path: str | Path, remedy: str | None = None) -> Iterator[None]:
     """A PhysposeError raised inside that names no file is about ``path`` (a check deep in a
-    stage knows the data, not the file it came from)."""
+    stage knows the data, not the file it came from); ``remedy`` where it gave none."""
     try:
         yield
     except PhysposeError as exc:
         if exc.path is not None:
             raise
-        raise PhysposeError(exc.problem, path=path, frame=exc.frame, remedy=exc.remedy) from None
+        raise PhysposeError(exc.problem, path=path, frame=exc.frame,
+                            remedy=exc.remedy or remedy) from None

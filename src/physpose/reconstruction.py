@@ -204,5 +204,5 @@ class Reconstruction:
             raise damaged(f"its metadata is not JSON ({exc})") from None
         if not isinstance(meta, dict):
             raise damaged("its metadata is not a JSON object")
-        with about(path):  # a field of the wrong shape: say which file holds it
+        with about(path, "re-run the reconstruction with this physpose version"):  # a shape
             return cls(meta=meta, **fields)
