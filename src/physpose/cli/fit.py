@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from physpose import __version__
+from physpose.cli.observe import add_video_options, config_from_args, video_options_given
 from physpose.diagnostics import low_camera_message, rate_message
 from physpose.errors import PhysposeError
 from physpose.kinematics.camera import check_intrinsics
@@ -20,7 +21,6 @@ from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
 from physpose.kinematics.fit import fit_kinematics, stderr_log
 from physpose.metrics import camera_height
 from physpose.observations import check_slow_motion
-from physpose.cli.observe import add_video_options, config_from_args, video_options_given
 from physpose.observe import footage_observe
 from physpose.paths import check_output_folder
 
