@@ -53,6 +53,7 @@ def test_reconstruct_cli_refuses_a_clip_of_one_frame(tmp_path, capsys):
     code = main(["reconstruct", str(keypoints), "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert code == 2 and "only 1 frame" in err and "one.npz" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()  # nothing left behind for a refused clip
 
 
 def test_detections_left_out_as_torn_are_timed_on_the_footages_clock():

@@ -133,10 +133,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
 
     out_dir = Path(out_dir)
     check_output_folder(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
     windows = out_dir / CHECKPOINT_FOLDER
-    if not resume and windows.exists():
-        shutil.rmtree(windows)
     timings: dict[str, float] = {}
     clock = time.perf_counter()
 
@@ -152,6 +149,9 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
         raise PhysposeError(f"only {obs.num_frames} frame{'s' * (obs.num_frames != 1)} to "
                             f"reconstruct motion from (need at least {MIN_FRAMES})",
                             path=obs.source, remedy="use a longer clip, or a wider --start/--end")
+    out_dir.mkdir(parents=True, exist_ok=True)  # not before a check that could refuse the clip
+    if not resume and windows.exists():
+        shutil.rmtree(windows)
     lap("observe")
     _warn(diagnostics.rate_message(obs.fps))
     observed_frames = obs.num_frames
