@@ -78,3 +78,14 @@ def test_a_problem_found_in_the_result_names_its_file(results, capsys):
     assert main(["export", str(results["kinematic"]), "-f", "forces"]) == 2
     err = capsys.readouterr().err
     assert f"{results['kinematic'] / 'reconstruction.npz'}: this result holds no simulated" in err
+
+
+def test_a_result_with_a_malformed_image_size_is_named(results, tmp_path, capsys):
+    from physpose.reconstruction import Reconstruction  # noqa: PLC0415
+
+    rec = Reconstruction.load(results["physics"])
+    folder = tmp_path / "odd"
+    rec.replace(meta={**rec.meta, "image_size": "640x360"}).save(folder / "reconstruction.npz")
+    assert main(["overlay", str(folder), "--png-frame", "0"]) == 2
+    err = capsys.readouterr().err
+    assert f"{folder / 'reconstruction.npz'}: its image_size '640x360' is not" in err

@@ -240,13 +240,18 @@ def _frames(rec: Reconstruction, video: str | Path | None) -> tuple[Iterator, tu
     """(iterator of BGR frames or None per analysed frame, image size (w, h), description)."""
     given = video is not None
     path = Path(video) if given else Path(rec.meta.get("source") or "")
-    size = rec.meta.get("image_size") or (2 * rec.camera_K[0, 2], 2 * rec.camera_K[1, 2])
+    recorded = rec.meta.get("image_size")
+    if recorded is not None and not (
+            isinstance(recorded, (list, tuple)) and len(recorded) == 2
+            and all(isinstance(v, (int, float)) and 0 < v < 1e5 for v in recorded)):
+        raise PhysposeError(f"its image_size {recorded!r} is not a width and a height in "
+                            "pixels", remedy="re-run the reconstruction")
+    size = recorded or (2 * rec.camera_K[0, 2], 2 * rec.camera_K[1, 2])
     size = (int(round(size[0])), int(round(size[1])))
     if not given and not (str(path) and path.is_file()
                           and path.suffix.lower() in videolib.VIDEO_EXTENSIONS):
         return iter([None] * rec.num_frames), size, "plain background (no source video found)"
     info = videolib.probe(path)
-    recorded = rec.meta.get("image_size")
     if recorded is not None and tuple(map(int, recorded)) != (info.width, info.height):
         if not given:  # the recorded video has changed since: draw without it
             return iter([None] * rec.num_frames), size, \
