@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from physpose import __version__
-from physpose.cli.observe import add_video_options, config_from_args, video_options_given
+from physpose.cli.observe import add_video_options, config_from_args, refuse_video_options
 from physpose.diagnostics import low_camera_message, rate_message
 from physpose.errors import PhysposeError
 from physpose.kinematics.camera import check_intrinsics
@@ -85,9 +85,8 @@ def _run(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     observe_cfg = config_from_args(args)
-    if args.input.suffix.lower() in (".npz", ".json") and video_options_given(observe_cfg):
-        raise PhysposeError("--fps/--start/--end/--person/--static-camera apply to videos, not "
-                            "to observations", path=args.input, remedy="drop those options")
+    if args.input.suffix.lower() in (".npz", ".json"):
+        refuse_video_options(observe_cfg, args.input)
     check_slow_motion(args.slow_motion)
     check_output_folder(args.out)
     K = read_intrinsics(args.camera) if args.camera is not None else None  # before the work

@@ -59,11 +59,8 @@ def run_observe(source: str | Path, out_dir: str | Path, cfg: ObserveConfig = Ob
     start = time.perf_counter()
     source, out_dir = Path(source), Path(out_dir)
     keypoints = is_keypoints_file(source)
-    if keypoints and video_options_given(cfg):
-        raise PhysposeError("--fps/--start/--end/--person/--static-camera apply to videos, not "
-                            "to precomputed keypoints", path=source,
-                            remedy="drop those options, or resample the keypoints before "
-                                   "writing them")
+    if keypoints:
+        refuse_video_options(cfg, source)
     check_output_folder(out_dir)
     obs = load_keypoints(source) if keypoints else observe(source, cfg, progress=progress)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -120,9 +117,13 @@ def add_video_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--no-cache", action="store_true", help="recompute even if cached")
 
 
-def video_options_given(cfg: ObserveConfig) -> bool:
-    """Whether cfg asks for more than the defaults (and the cache choice)."""
-    return cfg != dataclasses.replace(ObserveConfig(), use_cache=cfg.use_cache)
+def refuse_video_options(cfg: ObserveConfig, keypoints: Path) -> None:
+    """Keypoints (or observations) were detected already: options that say how to observe a
+    video (anything but the cache choice) cannot apply to them."""
+    if cfg != dataclasses.replace(ObserveConfig(), use_cache=cfg.use_cache):
+        raise PhysposeError("--fps/--start/--end/--person/--static-camera apply to videos, not "
+                            "to precomputed keypoints", path=keypoints,
+                            remedy="drop those options, or cut or resample the keypoints file")
 
 
 def config_from_args(args: argparse.Namespace) -> ObserveConfig:

@@ -16,7 +16,7 @@ from physpose.dynamics import PRESETS
 from physpose.dynamics.objective import TERMS, ObjectiveWeights
 from physpose.dynamics.travel import CAMERA_SETTINGS
 from physpose.cli.observe import (PERSON_HELP, STATIC_CAMERA_HELP, image_point,
-                                  video_options_given)
+                                  refuse_video_options)
 from physpose.errors import PhysposeError
 from physpose.export import FORMATS
 from physpose.keypoints_io import is_keypoints_file
@@ -248,10 +248,7 @@ def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:
     if is_keypoints_file(video):
         if not video.is_file():
             raise PhysposeError("keypoints file not found", path=video, remedy="check the path")
-        if video_options_given(config.observe):
-            raise PhysposeError("--fps/--start/--end/--person/--static-camera apply to videos, "
-                                "not to precomputed keypoints", path=video,
-                                remedy="drop them, or cut the keypoints file")
+        refuse_video_options(config.observe, video)
         return None
     info = videolib.probe(video)
     observe = config.footage_observe()
