@@ -169,11 +169,15 @@ class Reconstruction:
         arrays["meta_json"] = np.array(json.dumps(self.meta, default=str))
         return write_npz(path, arrays)
 
+    @staticmethod
+    def file_in(result: str | Path) -> Path:
+        """The reconstruction file of a result folder (or the file itself)."""
+        result = Path(result)
+        return result / "reconstruction.npz" if result.is_dir() else result
+
     @classmethod
     def load(cls, path: str | Path) -> "Reconstruction":
-        path = Path(path)
-        if path.is_dir():
-            path = path / "reconstruction.npz"
+        path = cls.file_in(path)
         if not path.is_file():
             raise PhysposeError("reconstruction not found", path=path,
                                 remedy="pass a folder written by `physpose fit` or "

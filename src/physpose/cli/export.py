@@ -7,6 +7,7 @@ from pathlib import Path
 
 from physpose.errors import PhysposeError, about
 from physpose.export import DEFAULT_NAMES, FORMATS, export
+from physpose.reconstruction import Reconstruction
 from physpose.render.result import MOTIONS
 
 _RESULT_HELP = "result folder written by `physpose reconstruct` (holds reconstruction.npz)"
@@ -60,7 +61,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _run_export(args: argparse.Namespace) -> int:
-    with about(_result_file(args.result)):
+    with about(Reconstruction.file_in(args.result)):
         print(export(args.result, args.fmt, args.out, motion=args.motion))
     return 0
 
@@ -68,7 +69,7 @@ def _run_export(args: argparse.Namespace) -> int:
 def _run_report(args: argparse.Namespace) -> int:
     from physpose.report import build_report
 
-    with about(_result_file(args.result)):
+    with about(Reconstruction.file_in(args.result)):
         print(build_report(args.result, args.out))
     return 0
 
@@ -78,7 +79,7 @@ def _run_overlay(args: argparse.Namespace) -> int:
 
     if args.out is not None:
         _check_file_out(args.out, ".png" if args.png_frame is not None else ".mp4")
-    with about(_result_file(args.result)):
+    with about(Reconstruction.file_in(args.result)):
         if args.png_frame is not None:
             out = args.out if args.out is not None else \
                 args.result / f"overlay_{args.png_frame}.png"
@@ -87,11 +88,6 @@ def _run_overlay(args: argparse.Namespace) -> int:
         made = render_overlay(args.result, args.out, video=args.video, progress=True)
     print(f"{made.path} (drawn on {made.background})")
     return 0
-
-
-def _result_file(result: Path) -> Path:
-    """The file a result's problems are reported against."""
-    return result / "reconstruction.npz" if result.is_dir() else result
 
 
 def _check_file_out(out: Path, suffix: str) -> None:

@@ -18,7 +18,7 @@ def load_result(result: str | Path) -> tuple[Reconstruction, Path]:
     path = Path(result)
     if not path.exists():
         raise PhysposeError("result folder not found", path=path, remedy=_RESULT_REMEDY)
-    if path.is_dir() and not (path / "reconstruction.npz").is_file():
+    if path.is_dir() and not Reconstruction.file_in(path).is_file():
         raise PhysposeError("this folder holds no reconstruction.npz", path=path,
                             remedy=_RESULT_REMEDY)
     rec = Reconstruction.load(path)

@@ -13,6 +13,7 @@ from string import Template
 
 from physpose import __version__
 from physpose.errors import PhysposeError
+from physpose.reconstruction import Reconstruction
 from physpose.report.data import metric_rows, report_data, summary_rows
 from physpose.render.result import load_result
 
@@ -40,7 +41,7 @@ def build_report(result_dir: str | Path, out_html: str | Path | None = None,
         data_json = json.dumps(data, separators=(",", ":"), allow_nan=False)
     except ValueError:  # the viewer draws numbers only
         raise PhysposeError("the result holds positions that are not numbers (NaN or infinity)",
-                            path=folder / "reconstruction.npz",
+                            path=Reconstruction.file_in(folder),
                             remedy="re-run the reconstruction") from None
     columns, rows = metric_rows(rec, metrics)
     page = Template((ASSETS / "template.html").read_text()).substitute(
