@@ -32,13 +32,15 @@ class PhysposeError(Exception):
 
 
 @contextmanager
-def about(path: str | Path, remedy: str | None = None) -> Iterator[None]:
-    """A PhysposeError raised inside that names no file is about ``path`` (a check deep in a
-    stage knows the data, not the file it came from); ``remedy`` where it gave none."""
+def about(path: str | Path, remedy: str | None = None, *,
+          instead_of: str | Path | None = None) -> Iterator[None]:
+    """A PhysposeError raised inside that names no file, or names ``instead_of``, is about
+    ``path`` (a check deep in a stage knows the data, not the file the user gave);
+    ``remedy`` where it gave none."""
     try:
         yield
     except PhysposeError as exc:
-        if exc.path is not None:
+        if exc.path is not None and (instead_of is None or exc.path != str(instead_of)):
             raise
         raise PhysposeError(exc.problem, path=path, frame=exc.frame,
                             remedy=exc.remedy or remedy) from None

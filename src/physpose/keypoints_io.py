@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from physpose.cache import atomic_path
-from physpose.errors import PhysposeError
+from physpose.errors import PhysposeError, about
 from physpose.joints import LANDMARK_NAMES, NUM_LANDMARKS
 from physpose.observations import CAMERA_MOTIONS, Observations
 
@@ -186,10 +186,10 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
              "leave camera_motion out, or write what `physpose observe` wrote")
     masks = raw.get("masks")
     source = raw.get("source")
-    try:  # Observations' own checks name the recorded video; the user passed this file
+    recorded = str(path) if source is None else str(np.asarray(source))
+    with about(path, instead_of=recorded):  # the checks name the recorded video, not this file
         return Observations(
-            source=str(path) if source is None else str(np.asarray(source)),
-            fps=float(fps), image_size=(int(size[0]), int(size[1])),
+            source=recorded, fps=float(fps), image_size=(int(size[0]), int(size[1])),
             timestamps=ts.astype(float), keypoints2d=kp, detected=detected,
             interpolated=interpolated, world_landmarks=per_frame["world_landmarks"],
             masks=None if masks is None else np.asarray(masks), camera_K=camera_k,
@@ -197,8 +197,6 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
             else per_frame["frame_indices"].astype(np.int64),
             homographies=homographies, camera_motion=motion,
             unsure=None if per_frame["unsure"] is None else per_frame["unsure"].astype(bool))
-    except PhysposeError as exc:
-        raise PhysposeError(exc.problem, path=path, frame=exc.frame, remedy=exc.remedy) from None
 
 
 def _number(value: Any) -> float | None:
