@@ -35,6 +35,8 @@ from physpose.paths import cache_dir
 
 CACHE_FORMAT = 1  # bump if the key recipe or the entry layout changes
 _CHUNK = 1 << 20  # bytes read at a time when hashing files
+# What np.load raises for an npz file that is damaged, cut short or not an npz at all.
+UNREADABLE_NPZ = (OSError, ValueError, EOFError, zipfile.BadZipFile)
 _log = logging.getLogger(__name__)
 # (resolved path, size, mtime_ns) -> sha256 hex, so a file is hashed once per process.
 _digests: dict[tuple[str, int, int], str] = {}
@@ -135,7 +137,7 @@ class Cache:
         try:
             with np.load(path, allow_pickle=False) as data:
                 return {k: data[k] for k in data.files}
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        except UNREADABLE_NPZ as exc:
             _log.warning("dropping unreadable cache entry %s (%s)", path, exc)
             path.unlink(missing_ok=True)
             return None

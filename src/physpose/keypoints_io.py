@@ -8,13 +8,12 @@ from __future__ import annotations
 
 import json
 import math
-import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from physpose.cache import atomic_path
+from physpose.cache import UNREADABLE_NPZ, atomic_path
 from physpose.errors import PhysposeError, about
 from physpose.joints import LANDMARK_NAMES, NUM_LANDMARKS
 from physpose.observations import CAMERA_MOTIONS, Observations
@@ -91,7 +90,7 @@ def _read_npz(path: Path) -> dict[str, Any]:
     try:
         with np.load(path, allow_pickle=False) as data:
             return {k: data[k] for k in data.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+    except UNREADABLE_NPZ as exc:
         raise PhysposeError(f"not a readable npz file ({exc})", path=path,
                             remedy="write it with numpy.savez (no object arrays); " + _DOC) from None
 

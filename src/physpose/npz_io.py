@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from physpose.cache import atomic_path
+from physpose.cache import UNREADABLE_NPZ, atomic_path
 from physpose.errors import PhysposeError
 
 
@@ -24,6 +23,6 @@ def read_npz(path: str | Path, *, what: str, remedy: str) -> dict[str, np.ndarra
     try:
         with np.load(path, allow_pickle=False) as data:
             return {k: data[k] for k in data.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+    except UNREADABLE_NPZ as exc:
         raise PhysposeError(f"not a readable {what} npz ({exc})", path=path,
                             remedy=remedy) from None

@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import json
 import logging
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from physpose.cache import atomic_path, stage_key
+from physpose.cache import UNREADABLE_NPZ, atomic_path, stage_key
 from physpose.paths import cache_dir
 
 _log = logging.getLogger(__name__)
@@ -67,7 +66,7 @@ def load_window(folder: Path, index: int) -> tuple[dict[str, np.ndarray], dict] 
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files if k != "record_json"}
             record = json.loads(str(data["record_json"]))
-    except (OSError, ValueError, EOFError, KeyError, zipfile.BadZipFile) as exc:
+    except (*UNREADABLE_NPZ, KeyError) as exc:  # KeyError: no record inside
         _log.warning("%s: unreadable checkpoint (%s); this window is optimised again", path, exc)
         path.unlink(missing_ok=True)
         return None
