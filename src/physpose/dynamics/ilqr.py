@@ -53,8 +53,9 @@ import mujoco
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from physpose.dynamics.objective import MIN_DEPTH, project
+from physpose.dynamics.objective import MIN_DEPTH, pinhole
 from physpose.errors import PhysposeError
+from physpose.metrics import transform_points
 from physpose.skeleton import NUM_DOF
 
 _FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -144,7 +145,7 @@ class ImageTerm:
 
 
 def _normalised_jacobian(points: np.ndarray) -> np.ndarray:
-    """(L, 2, 3): the derivative of ``objective.project``'s normalised coordinates (x/z, y/z)
+    """(L, 2, 3): the derivative of ``objective.pinhole``'s normalised coordinates (x/z, y/z)
     by the camera-frame points (L, 3); a depth clamped at MIN_DEPTH does not vary."""
     z = np.maximum(points[:, 2], MIN_DEPTH)
     free = points[:, 2] > MIN_DEPTH
@@ -233,7 +234,7 @@ class _Problem:
         if img is None:
             return 0.0, {}
         m, d = self.model, self.posed
-        R, tr = img.T_world2cam[:3, :3], img.T_world2cam[:3, 3]
+        R = img.T_world2cam[:3, :3]
         delta, w = self.cfg.image_huber, self.cfg.image
         jac = np.zeros((len(img.site_ids), 3, self.nv))
         total, out = 0.0, {}
@@ -245,7 +246,8 @@ class _Problem:
             sites = d.site_xpos[img.site_ids]
             if img.camera_travel is not None:
                 sites = sites - img.camera_travel[f]
-            uv = project(sites, img.K, img.T_world2cam)  # the search's own projection
+            cam = transform_points(img.T_world2cam, sites)
+            uv = pinhole(cam, img.K)  # the search's own projection
             e = (uv - img.keypoints[f, :, :2]) * img.metres_per_px[f]  # (33, 2) m
             norm = np.linalg.norm(e, axis=1)
             conf = img.keypoints[f, :, 2]
@@ -256,7 +258,7 @@ class _Problem:
             mujoco.mj_comPos(m, d)
             for i, site in enumerate(img.site_ids):
                 mujoco.mj_jacSite(m, d, jac[i], None, int(site))
-            dpi = img.K[:2, :2] @ _normalised_jacobian(sites @ R.T + tr)  # d(uv)/d(camera)
+            dpi = img.K[:2, :2] @ _normalised_jacobian(cam)  # d(uv)/d(camera point)
             J = np.einsum("lij,jk,lkv->liv", dpi, R, jac) * img.metres_per_px[f]  # (33, 2, nv)
             weight = w * conf * np.minimum(1.0, delta / np.maximum(norm, 1e-12))
             out[int(t)] = (np.einsum("l,liv,li->v", weight, J, e),

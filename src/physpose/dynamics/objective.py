@@ -227,7 +227,11 @@ def _cost_pose(s: FrameSamples, ref: ObjectiveReference, frames: np.ndarray, his
 
 def project(points: np.ndarray, K: np.ndarray, T_world2cam: np.ndarray) -> np.ndarray:
     """Pinhole projection (..., 3) world -> (..., 2) px, depth clamped at MIN_DEPTH."""
-    cam = transform_points(T_world2cam, points)
+    return pinhole(transform_points(T_world2cam, points), K)
+
+
+def pinhole(cam: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """Camera-frame points (..., 3) -> (..., 2) px, depth clamped at MIN_DEPTH."""
     z = np.maximum(cam[..., 2:3], MIN_DEPTH)
     return (cam[..., :2] / z) @ K[:2, :2].T + K[:2, 2]
 
