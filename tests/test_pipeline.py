@@ -56,6 +56,21 @@ def test_reconstruct_cli_refuses_a_clip_of_one_frame(tmp_path, capsys):
     assert not (tmp_path / "out").exists()  # nothing left behind for a refused clip
 
 
+def test_a_reconstruction_failing_in_a_later_stage_leaves_no_empty_folder(tmp_path,
+                                                                        monkeypatch):
+    import physpose.kinematics.fit as fit  # noqa: PLC0415 (JAX)
+
+    def fail(*args, **kwargs):
+        raise PhysposeError("the fit failed")
+
+    monkeypatch.setattr(fit, "fit_kinematics", fail)
+    body = build_body(BodyShape.from_height(1.75))
+    _, obs, _ = simulated_clip(body, "stand", seconds=0.4)
+    with pytest.raises(PhysposeError, match="the fit failed"):
+        reconstruct(obs, tmp_path / "runs" / "out", progress=False)
+    assert not (tmp_path / "runs").exists()
+
+
 def test_detections_left_out_as_torn_are_timed_on_the_footages_clock():
     body = build_body(BodyShape.from_height(1.75, 70.0))
     _, obs, _ = simulated_clip(body, "stand", seconds=0.4)

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 from physpose.errors import PhysposeError
@@ -55,3 +57,23 @@ def check_output_folder(path: str | Path, option: str = "--out") -> Path:
         raise PhysposeError(f"cannot write into {existing}", path=path,
                             remedy=f"pass a folder you may write to for {option}")
     return path
+
+
+@contextlib.contextmanager
+def output_folder(path: str | Path) -> Iterator[Path]:
+    """Make the output folder for the work inside the block. If the work fails, the folders
+    this made (the output folder, its new parents and what was made inside it) are removed
+    again where they stayed empty, so a failed run leaves no empty folder behind; a file, and
+    a folder that was there before, are never touched."""
+    path = Path(path)
+    made = [p for p in (path, *path.parents) if not p.exists()]
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        yield path
+    except BaseException:
+        if made:
+            inner = sorted((p for p in path.rglob("*") if p.is_dir()), key=lambda p: -len(p.parts))
+            for folder in (*inner, *made):  # deepest first
+                with contextlib.suppress(OSError):
+                    folder.rmdir()  # only succeeds on an empty folder
+        raise

@@ -30,7 +30,7 @@ from physpose.kinematics.config import KinematicConfig
 from physpose.keypoints_io import is_keypoints_file, load_keypoints
 from physpose.observations import Observations, check_slow_motion
 from physpose.observe import ObserveConfig, footage_observe, observe
-from physpose.paths import check_output_folder
+from physpose.paths import check_output_folder, output_folder
 from physpose.reconstruction import Reconstruction
 from physpose.scene import SceneConfig
 
@@ -149,71 +149,71 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
         raise PhysposeError(f"only {obs.num_frames} frame{'s' * (obs.num_frames != 1)} to "
                             f"reconstruct motion from (need at least {MIN_FRAMES})",
                             path=obs.source, remedy="use a longer clip, or a wider --start/--end")
-    out_dir.mkdir(parents=True, exist_ok=True)  # not before a check that could refuse the clip
-    if not resume and windows.exists():
-        shutil.rmtree(windows)
-    lap("observe")
-    _warn(diagnostics.rate_message(obs.fps))
-    observed_frames = obs.num_frames
-    unsure = unsure_times(obs, config.slow_motion)
-    _warn(diagnostics.unsure_message(unsure))
-    obs, trimmed = trim_unseen_ends(obs)
-    _warn(diagnostics.trimmed_message(trimmed, observed_frames, obs.fps))
-    _warn(diagnostics.camera_message(obs.camera_motion))
-    jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
-    _warn(diagnostics.jumps_message(jumps, obs.fps))
-    keypoints = obs.frame_keypoints()
-    hidden_feet = diagnostics.hidden_feet_share(keypoints, obs.valid, obs.image_size)
-    _warn(diagnostics.hidden_feet_message(hidden_feet))
-    stride = diagnostics.stride_period(keypoints, obs.valid, obs.fps)
-    _warn(diagnostics.slow_stride_message(stride, config.slow_motion))
-    kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
-                         **({"log": stderr_log} if progress else {}))
-    lap("kinematics")
-    camera_height = metrics.camera_height(kin.T_world2cam)
-    _warn(diagnostics.low_camera_message(camera_height))
-    raised = diagnostics.raised_runs(kin.joints, kin.fps)
-    boxes = supports.support_boxes(kin.joints, raised, kin.fps, kin.support_heights) \
-        if config.auto_support else ()
-    _warn(diagnostics.raised_message(raised, kin.fps, supported=bool(boxes)))
-    seated = supports.seated_runs(kin.joints, kin.fps)
-    seats = supports.seat_boxes(kin.joints, seated) if config.auto_support else ()
-    _warn(diagnostics.seated_message(seated, seats, kin.fps))
-    scene = config.scene
-    if boxes or seats:
-        scene = dataclasses.replace(scene, obstacles=scene.obstacles + boxes + seats)
-    body = build_body(kin.shape, scene, config.body)
-    lap("body")
-    phys = optimize_dynamics(body, kin, obs, config.dynamics, checkpoint_dir=windows,
-                             progress=progress)
-    lap("dynamics")
-    invalid = diagnostics.invalid_window_runs(phys.windows,
-                                              sequential=not config.dynamics.independent)
-    _warn(diagnostics.invalid_message(invalid, kin.fps))
-    unrecorded = diagnostics.unrecorded_force_runs(phys.grf)
-    _warn(diagnostics.unrecorded_forces_message(unrecorded, kin.fps))
-    recon = kin.to_reconstruction(obs, body_mjcf=body.xml).replace(
-        **phys.reconstruction_fields())
-    meta = dict(recon.meta)
-    meta.update(slow_motion=config.slow_motion, timings_s=timings,
-                dynamics={**phys.meta(), "timings": phys.timings},
-                physpose_version=__version__,
-                diagnostics={"trimmed": trimmed, "observed_frames": observed_frames,
-                             "camera_motion": obs.camera_motion,
-                             "unsure_detections": unsure,
-                             "person_jumps": jumps, "hidden_feet": hidden_feet,
-                             "raised": [list(r) for r in raised],
-                             "supports": [[*b.center, *b.size] for b in boxes],
-                             "seated": [list(r) for r in seated],
-                             "seats": [b.spec() for b in seats],
-                             "invalid_windows": [list(r) for r in invalid],
-                             "unrecorded_forces": [list(r) for r in unrecorded],
-                             "stride_period": stride, "camera_height": camera_height})
-    recon = recon.replace(meta=meta)
-    recon.save(out_dir / RECONSTRUCTION_FILE)
-    resolved = {"stage": "reconstruct", "physpose_version": __version__,
-                "input": obs.source, "height": height, "mass": mass,
-                "config": config.to_json(), "timings_s": timings}
-    with atomic_path(out_dir / CONFIG_FILE) as tmp:
-        tmp.write_text(json.dumps(resolved, indent=2) + "\n")
-    return recon
+    with output_folder(out_dir):  # not made before a check that could refuse the clip
+        if not resume and windows.exists():
+            shutil.rmtree(windows)
+        lap("observe")
+        _warn(diagnostics.rate_message(obs.fps))
+        observed_frames = obs.num_frames
+        unsure = unsure_times(obs, config.slow_motion)
+        _warn(diagnostics.unsure_message(unsure))
+        obs, trimmed = trim_unseen_ends(obs)
+        _warn(diagnostics.trimmed_message(trimmed, observed_frames, obs.fps))
+        _warn(diagnostics.camera_message(obs.camera_motion))
+        jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
+        _warn(diagnostics.jumps_message(jumps, obs.fps))
+        keypoints = obs.frame_keypoints()
+        hidden_feet = diagnostics.hidden_feet_share(keypoints, obs.valid, obs.image_size)
+        _warn(diagnostics.hidden_feet_message(hidden_feet))
+        stride = diagnostics.stride_period(keypoints, obs.valid, obs.fps)
+        _warn(diagnostics.slow_stride_message(stride, config.slow_motion))
+        kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
+                             **({"log": stderr_log} if progress else {}))
+        lap("kinematics")
+        camera_height = metrics.camera_height(kin.T_world2cam)
+        _warn(diagnostics.low_camera_message(camera_height))
+        raised = diagnostics.raised_runs(kin.joints, kin.fps)
+        boxes = supports.support_boxes(kin.joints, raised, kin.fps, kin.support_heights) \
+            if config.auto_support else ()
+        _warn(diagnostics.raised_message(raised, kin.fps, supported=bool(boxes)))
+        seated = supports.seated_runs(kin.joints, kin.fps)
+        seats = supports.seat_boxes(kin.joints, seated) if config.auto_support else ()
+        _warn(diagnostics.seated_message(seated, seats, kin.fps))
+        scene = config.scene
+        if boxes or seats:
+            scene = dataclasses.replace(scene, obstacles=scene.obstacles + boxes + seats)
+        body = build_body(kin.shape, scene, config.body)
+        lap("body")
+        phys = optimize_dynamics(body, kin, obs, config.dynamics, checkpoint_dir=windows,
+                                 progress=progress)
+        lap("dynamics")
+        invalid = diagnostics.invalid_window_runs(phys.windows,
+                                                  sequential=not config.dynamics.independent)
+        _warn(diagnostics.invalid_message(invalid, kin.fps))
+        unrecorded = diagnostics.unrecorded_force_runs(phys.grf)
+        _warn(diagnostics.unrecorded_forces_message(unrecorded, kin.fps))
+        recon = kin.to_reconstruction(obs, body_mjcf=body.xml).replace(
+            **phys.reconstruction_fields())
+        meta = dict(recon.meta)
+        meta.update(slow_motion=config.slow_motion, timings_s=timings,
+                    dynamics={**phys.meta(), "timings": phys.timings},
+                    physpose_version=__version__,
+                    diagnostics={"trimmed": trimmed, "observed_frames": observed_frames,
+                                 "camera_motion": obs.camera_motion,
+                                 "unsure_detections": unsure,
+                                 "person_jumps": jumps, "hidden_feet": hidden_feet,
+                                 "raised": [list(r) for r in raised],
+                                 "supports": [[*b.center, *b.size] for b in boxes],
+                                 "seated": [list(r) for r in seated],
+                                 "seats": [b.spec() for b in seats],
+                                 "invalid_windows": [list(r) for r in invalid],
+                                 "unrecorded_forces": [list(r) for r in unrecorded],
+                                 "stride_period": stride, "camera_height": camera_height})
+        recon = recon.replace(meta=meta)
+        recon.save(out_dir / RECONSTRUCTION_FILE)
+        resolved = {"stage": "reconstruct", "physpose_version": __version__,
+                    "input": obs.source, "height": height, "mass": mass,
+                    "config": config.to_json(), "timings_s": timings}
+        with atomic_path(out_dir / CONFIG_FILE) as tmp:
+            tmp.write_text(json.dumps(resolved, indent=2) + "\n")
+        return recon
