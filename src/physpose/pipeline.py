@@ -23,10 +23,11 @@ from physpose import __version__, diagnostics, metrics, supports
 from physpose.body import BodyConfig, build_body
 from physpose.cache import atomic_path
 from physpose.dynamics import PRESETS as DYNAMICS_PRESETS
-from physpose.dynamics import DynamicsConfig, optimize_dynamics
+from physpose.dynamics import DynamicsConfig, PhysicsResult, optimize_dynamics
 from physpose.dynamics.optimize import MIN_FRAMES
 from physpose.errors import PhysposeError
 from physpose.kinematics.config import KinematicConfig
+from physpose.kinematics.result import KinematicFit
 from physpose.keypoints_io import is_keypoints_file, load_keypoints
 from physpose.observations import Observations, check_slow_motion
 from physpose.observe import ObserveConfig, footage_observe, observe
@@ -134,15 +135,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     out_dir = Path(out_dir)
     check_output_folder(out_dir)
     windows = out_dir / CHECKPOINT_FOLDER
-    timings: dict[str, float] = {}
-    clock = time.perf_counter()
-
-    def lap(stage: str) -> None:
-        nonlocal clock
-        now = time.perf_counter()
-        timings[stage] = now - clock
-        clock = now
-
+    timings = _Stopwatch()
     obs = load_observations(video_or_observations, config.footage_observe(), progress)
     obs = obs.on_real_clock(config.slow_motion)
     if obs.num_frames < MIN_FRAMES:
@@ -152,68 +145,96 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     with output_folder(out_dir):  # not made before a check that could refuse the clip
         if not resume and windows.exists():
             shutil.rmtree(windows)
-        lap("observe")
-        _warn(diagnostics.rate_message(obs.fps))
-        observed_frames = obs.num_frames
-        unsure = unsure_times(obs, config.slow_motion)
-        _warn(diagnostics.unsure_message(unsure))
-        obs, trimmed = trim_unseen_ends(obs)
-        _warn(diagnostics.trimmed_message(trimmed, observed_frames, obs.fps))
-        _warn(diagnostics.camera_message(obs.camera_motion))
-        jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
-        _warn(diagnostics.jumps_message(jumps, obs.fps))
-        keypoints = obs.frame_keypoints()
-        hidden_feet = diagnostics.hidden_feet_share(keypoints, obs.valid, obs.image_size)
-        _warn(diagnostics.hidden_feet_message(hidden_feet))
-        stride = diagnostics.stride_period(keypoints, obs.valid, obs.fps)
-        _warn(diagnostics.slow_stride_message(stride, config.slow_motion))
+        timings.lap("observe")
+        obs, found = _screen_observations(obs, config.slow_motion)
         kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
                              **({"log": stderr_log} if progress else {}))
-        lap("kinematics")
-        camera_height = metrics.camera_height(kin.T_world2cam)
-        _warn(diagnostics.low_camera_message(camera_height))
-        raised = diagnostics.raised_runs(kin.joints, kin.fps)
-        boxes = supports.support_boxes(kin.joints, raised, kin.fps, kin.support_heights) \
-            if config.auto_support else ()
-        _warn(diagnostics.raised_message(raised, kin.fps, supported=bool(boxes)))
-        seated = supports.seated_runs(kin.joints, kin.fps)
-        seats = supports.seat_boxes(kin.joints, seated) if config.auto_support else ()
-        _warn(diagnostics.seated_message(seated, seats, kin.fps))
-        scene = config.scene
-        if boxes or seats:
-            scene = dataclasses.replace(scene, obstacles=scene.obstacles + boxes + seats)
+        timings.lap("kinematics")
+        scene = _scene_for(kin, config, found)
         body = build_body(kin.shape, scene, config.body)
-        lap("body")
+        timings.lap("body")
         phys = optimize_dynamics(body, kin, obs, config.dynamics, checkpoint_dir=windows,
                                  progress=progress)
-        lap("dynamics")
-        invalid = diagnostics.invalid_window_runs(phys.windows,
-                                                  sequential=not config.dynamics.independent)
-        _warn(diagnostics.invalid_message(invalid, kin.fps))
-        unrecorded = diagnostics.unrecorded_force_runs(phys.grf)
-        _warn(diagnostics.unrecorded_forces_message(unrecorded, kin.fps))
+        timings.lap("dynamics")
+        _screen_physics(phys, kin.fps, config.dynamics, found)
         recon = kin.to_reconstruction(obs, body_mjcf=body.xml).replace(
             **phys.reconstruction_fields())
-        meta = dict(recon.meta)
-        meta.update(slow_motion=config.slow_motion, timings_s=timings,
-                    dynamics={**phys.meta(), "timings": phys.timings},
-                    physpose_version=__version__,
-                    diagnostics={"trimmed": trimmed, "observed_frames": observed_frames,
-                                 "camera_motion": obs.camera_motion,
-                                 "unsure_detections": unsure,
-                                 "person_jumps": jumps, "hidden_feet": hidden_feet,
-                                 "raised": [list(r) for r in raised],
-                                 "supports": [[*b.center, *b.size] for b in boxes],
-                                 "seated": [list(r) for r in seated],
-                                 "seats": [b.spec() for b in seats],
-                                 "invalid_windows": [list(r) for r in invalid],
-                                 "unrecorded_forces": [list(r) for r in unrecorded],
-                                 "stride_period": stride, "camera_height": camera_height})
-        recon = recon.replace(meta=meta)
+        recon = recon.replace(meta={**recon.meta, "slow_motion": config.slow_motion,
+                                    "timings_s": timings.seconds,
+                                    "dynamics": {**phys.meta(), "timings": phys.timings},
+                                    "physpose_version": __version__, "diagnostics": found})
         recon.save(out_dir / RECONSTRUCTION_FILE)
         resolved = {"stage": "reconstruct", "physpose_version": __version__,
                     "input": obs.source, "height": height, "mass": mass,
-                    "config": config.to_json(), "timings_s": timings}
+                    "config": config.to_json(), "timings_s": timings.seconds}
         with atomic_path(out_dir / CONFIG_FILE) as tmp:
             tmp.write_text(json.dumps(resolved, indent=2) + "\n")
         return recon
+
+
+class _Stopwatch:
+    """Seconds per stage: `lap(stage)` books the time since the previous lap."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+        self._clock = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        now = time.perf_counter()
+        self.seconds[stage] = now - self._clock
+        self._clock = now
+
+
+def _screen_observations(obs: Observations, slow_motion: float
+                         ) -> tuple[Observations, dict]:
+    """The observations without their unseen ends, and what the input's checks found
+    (meta["diagnostics"]), each problem logged as a warning as soon as it is known."""
+    _warn(diagnostics.rate_message(obs.fps))
+    observed_frames = obs.num_frames
+    unsure = unsure_times(obs, slow_motion)
+    _warn(diagnostics.unsure_message(unsure))
+    obs, trimmed = trim_unseen_ends(obs)
+    _warn(diagnostics.trimmed_message(trimmed, observed_frames, obs.fps))
+    _warn(diagnostics.camera_message(obs.camera_motion))
+    jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
+    _warn(diagnostics.jumps_message(jumps, obs.fps))
+    keypoints = obs.frame_keypoints()
+    hidden_feet = diagnostics.hidden_feet_share(keypoints, obs.valid, obs.image_size)
+    _warn(diagnostics.hidden_feet_message(hidden_feet))
+    stride = diagnostics.stride_period(keypoints, obs.valid, obs.fps)
+    _warn(diagnostics.slow_stride_message(stride, slow_motion))
+    return obs, {"trimmed": trimmed, "observed_frames": observed_frames,
+                 "camera_motion": obs.camera_motion, "unsure_detections": unsure,
+                 "person_jumps": jumps, "hidden_feet": hidden_feet, "stride_period": stride}
+
+
+def _scene_for(kin: KinematicFit, config: PipelineConfig, found: dict) -> SceneConfig:
+    """The configured scene plus the supports and seats the estimate asks for (with
+    config.auto_support); what was found goes into `found`, problems are logged."""
+    camera_height = metrics.camera_height(kin.T_world2cam)
+    _warn(diagnostics.low_camera_message(camera_height))
+    raised = diagnostics.raised_runs(kin.joints, kin.fps)
+    boxes = supports.support_boxes(kin.joints, raised, kin.fps, kin.support_heights) \
+        if config.auto_support else ()
+    _warn(diagnostics.raised_message(raised, kin.fps, supported=bool(boxes)))
+    seated = supports.seated_runs(kin.joints, kin.fps)
+    seats = supports.seat_boxes(kin.joints, seated) if config.auto_support else ()
+    _warn(diagnostics.seated_message(seated, seats, kin.fps))
+    found.update(camera_height=camera_height, raised=[list(r) for r in raised],
+                 supports=[[*b.center, *b.size] for b in boxes],
+                 seated=[list(r) for r in seated], seats=[b.spec() for b in seats])
+    if not (boxes or seats):
+        return config.scene
+    return dataclasses.replace(config.scene,
+                               obstacles=config.scene.obstacles + boxes + seats)
+
+
+def _screen_physics(phys: PhysicsResult, fps: float, config: DynamicsConfig, found: dict) -> None:
+    """Windows without a valid sample and forces the simulation did not record, into
+    `found` and logged."""
+    invalid = diagnostics.invalid_window_runs(phys.windows, sequential=not config.independent)
+    _warn(diagnostics.invalid_message(invalid, fps))
+    unrecorded = diagnostics.unrecorded_force_runs(phys.grf)
+    _warn(diagnostics.unrecorded_forces_message(unrecorded, fps))
+    found.update(invalid_windows=[list(r) for r in invalid],
+                 unrecorded_forces=[list(r) for r in unrecorded])
