@@ -71,7 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "estimate and the detections after the search (0: off; default: the "
                         "preset's, 6 in fast, "
                         "0 in paper). On a simulated clip six iterations took 8.5 s per second "
-                        "of video beside the search's 11.8 s (docs/dynamics.md, Speed)")
+                        "of video beside the search's 11.8 s (docs/dynamics.md, Measured)")
     p.add_argument("--balance-hz", type=float, metavar="HZ",
                    help="closed-loop balance feedback (centre of mass through the standing "
                         "ankles) in every simulated sample, Hz, e.g. 0.5; 0 (the default) is "

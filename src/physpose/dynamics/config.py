@@ -1,8 +1,9 @@
 """Configuration of the trajectory optimisation: `DynamicsConfig`, its presets and the ablations.
 
 ``PRESETS["fast"]`` is the default, ``PRESETS["paper"]`` the paper's budget; ``ablated(config,
-name)`` removes the objective terms of one row of the paper's Table 2 (bottom half). Every field
-but the thread count is part of a run's checkpoint key (``DynamicsConfig.identity``).
+name)`` removes the objective terms of one row of the paper's Table 2 (bottom half). The fields
+that change one seed's windows are part of a run's checkpoint key
+(``DynamicsConfig.window_identity``).
 """
 
 from __future__ import annotations
