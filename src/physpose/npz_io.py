@@ -11,10 +11,14 @@ from physpose.errors import PhysposeError
 
 
 def write_npz(path: str | Path, arrays: dict[str, np.ndarray]) -> Path:
-    """Write compressed arrays; a crash never leaves a half-written file under `path`."""
+    """Write compressed arrays to exactly `path` (numpy would add ".npz" to a name without it);
+    a crash never leaves a half-written file under `path`."""
     path = Path(path)
-    with atomic_path(path) as tmp:
-        np.savez_compressed(tmp, **arrays)
+    if path.is_dir():
+        raise PhysposeError("cannot write the npz file: this is a folder", path=path,
+                            remedy=f"pass a file path, e.g. {path / 'name.npz'}")
+    with atomic_path(path) as tmp, tmp.open("wb") as fh:
+        np.savez_compressed(fh, **arrays)
     return path
 
 
