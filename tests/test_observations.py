@@ -54,6 +54,8 @@ def test_nan_keypoints_name_file_and_frame():
     (dict(detected=np.ones(3, bool)), "detected has shape"),
     (dict(unsure=np.zeros(5, bool)), "unsure has shape"),
     (dict(unsure=np.array([0, 2, 0, 0])), "expected \\(4,\\) bool"),
+    (dict(detected=np.ones(4, int)), "detected has type int64, expected bool"),
+    (dict(interpolated=np.zeros(4)), "interpolated has type float64, expected bool"),
 ])
 def test_malformed_fields_are_rejected(change, message):
     with pytest.raises(PhysposeError, match=message):
@@ -109,3 +111,16 @@ def test_slow_motion_footage_is_put_on_the_real_clock():
     for bad in (0.0, -2.0, float("nan"), 1000.0):
         with pytest.raises(PhysposeError, match="slow motion"):
             obs.on_real_clock(bad)
+
+
+def test_keypoints_normalised_to_0_1_are_refused_with_the_scaling():
+    pixels = _obs().keypoints2d
+    normalised = pixels.copy()
+    normalised[..., 0] /= 640.0
+    normalised[..., 1] /= 480.0
+    with pytest.raises(PhysposeError, match="look normalised") as err:
+        _obs(keypoints2d=normalised)
+    assert "multiply x by the width (640) and y by the height (480)" in str(err.value)
+    unsure = normalised.copy()
+    unsure[..., 2] = 0.1  # too unsure to tell: left to the later checks
+    assert _obs(keypoints2d=unsure).num_frames == 4

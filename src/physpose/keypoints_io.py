@@ -16,11 +16,10 @@ import numpy as np
 from physpose.cache import UNREADABLE_NPZ, atomic_path
 from physpose.errors import PhysposeError, about
 from physpose.joints import LANDMARK_NAMES, NUM_LANDMARKS
-from physpose.observations import CAMERA_MOTIONS, Observations
+from physpose.observations import CAMERA_MOTIONS, SURE_CONFIDENCE, Observations
 
 KEYPOINTS_EXTENSIONS = (".json", ".npz")
 _DOC = "see docs/keypoints_format.md"
-SURE_CONFIDENCE = 0.5  # a keypoint at least this sure must lie in the picture or near it
 _REQUIRED = ("fps", "image_size", "keypoints2d")
 _OPTIONAL = ("world_landmarks", "camera_K", "timestamps", "detected", "interpolated",
              "frame_indices", "masks", "source", "landmark_names", "format_version", "format",

@@ -19,6 +19,8 @@ from physpose.npz_io import read_npz, write_npz
 FORMAT_VERSION = 1
 CAMERA_MOTIONS = ("static", "turning", "moving")   # what `Observations.camera_motion` can say
 SLOW_MOTION_RANGE = (0.05, 50.0)  # footage seconds per real second that physpose accepts
+# A keypoint at least this sure is where the detector says: in the picture or near it, in pixels.
+SURE_CONFIDENCE = 0.5
 
 
 @dataclass(frozen=True, eq=False)
@@ -170,9 +172,10 @@ def validate(obs: Observations) -> None:
     """Raise PhysposeError naming the source and frame if any array is malformed."""
     src = obs.source
 
-    def fail(problem: str, frame: int | None = None) -> None:
-        raise PhysposeError(problem, path=src, frame=frame,
-                            remedy="check how the file was produced (see docs/keypoints_format.md)")
+    def fail(problem: str, frame: int | None = None,
+             remedy: str = "check how the file was produced (see docs/keypoints_format.md)"
+             ) -> None:
+        raise PhysposeError(problem, path=src, frame=frame, remedy=remedy)
 
     if not (np.isfinite(obs.fps) and 0.5 <= obs.fps <= 1000):
         fail(f"frame rate {obs.fps} Hz is outside 0.5-1000 Hz")
@@ -187,12 +190,22 @@ def validate(obs: Observations) -> None:
     for name in ("timestamps", "detected", "interpolated"):
         if np.asarray(getattr(obs, name)).shape != (t,):
             fail(f"{name} has shape {np.asarray(getattr(obs, name)).shape}, expected ({t},)")
+    for name in ("detected", "interpolated"):  # integer flags would index frames, not mask them
+        if np.asarray(getattr(obs, name)).dtype != bool:
+            fail(f"{name} has type {np.asarray(getattr(obs, name)).dtype}, expected bool",
+                 remedy=f"pass {name}=np.asarray({name}, bool)")
     bad = ~np.isfinite(kp).all(axis=(1, 2))
     if bad.any():
         fail("keypoints2d contains NaN or infinite values", int(np.argmax(bad)))
     conf = kp[..., 2]
     if (conf < 0).any() or (conf > 1).any():
         fail("keypoint confidences must lie in [0, 1]", int(np.argmax(((conf < 0) | (conf > 1)).any(1))))
+    sure = conf >= SURE_CONFIDENCE
+    if sure.any() and max(obs.image_size) >= 64 and np.abs(kp[..., :2][sure]).max() <= 1.5:
+        w, h = obs.image_size
+        fail(f"every sure keypoint lies within 1.5 px of the image's corner: the coordinates "
+             f"look normalised to [0, 1], not pixels of the {w}x{h} image",
+             remedy=f"multiply x by the width ({w}) and y by the height ({h})")
     if obs.world_landmarks is not None:
         wl = np.asarray(obs.world_landmarks)
         if wl.shape != (t, NUM_LANDMARKS, 3):
