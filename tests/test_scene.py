@@ -38,6 +38,20 @@ def test_malformed_obstacles_are_rejected_with_the_format(text, match):
     assert "box:x,y,z,sx,sy,sz" in str(err.value)
 
 
+@pytest.mark.parametrize("change, match", [
+    (dict(gravity=-9.81), "gravity -9.81 must be a positive magnitude"),
+    (dict(gravity=float("nan")), "gravity nan"),
+    (dict(obstacle_friction=-0.1), "obstacle friction -0.1 must be >= 0"),
+    (dict(obstacles=Box(center=(0, 0, 0.2), size=(1, 1, 0.4))), "must be a tuple of Box"),
+    (dict(obstacles=("box:0,0,0.2,1,1,0.4",)), "parse_obstacle"),
+])
+def test_impossible_scenes_are_refused_when_configured(change, match):
+    # (gravity=-9.81 had pointed gravity up; a bare Box or a string had failed only when the
+    # body was built, after the kinematic fit)
+    with pytest.raises(PhysposeError, match=match):
+        SceneConfig(**change)
+
+
 def test_scene_settings_reach_the_model():
     box = Box(center=(1.0, -0.5, 0.1), size=(0.4, 0.6, 0.2), yaw=math.radians(30))
     scene = SceneConfig(ground_friction=0.4, obstacles=(box,)).with_ground(stiffness=900.0)

@@ -79,9 +79,19 @@ class SceneConfig:
     gravity: float = GRAVITY
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.ground_friction) and self.ground_friction >= 0):
-            raise PhysposeError(f"ground friction {self.ground_friction} must be >= 0",
-                                remedy="give a friction coefficient such as 0.9")
+        for name in ("ground_friction", "obstacle_friction"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise PhysposeError(f"{name.replace('_', ' ')} {value} must be >= 0",
+                                    remedy="give a friction coefficient such as 0.9")
+        if not (math.isfinite(self.gravity) and self.gravity > 0):
+            raise PhysposeError(f"gravity {self.gravity} must be a positive magnitude (m/s^2; "
+                                "it points down, -z)", remedy=f"use e.g. {GRAVITY}")
+        if not isinstance(self.obstacles, tuple) or \
+                not all(isinstance(box, Box) for box in self.obstacles):
+            raise PhysposeError(f"obstacles must be a tuple of Box, not {self.obstacles!r}",
+                                remedy="e.g. obstacles=(Box(center=(x, y, z), size=(sx, sy, sz)),)"
+                                       " or parse_obstacle('box:x,y,z,sx,sy,sz')")
         a, b = self.ground_solref
         if not (math.isfinite(a) and math.isfinite(b)) or (a > 0) != (b > 0) or a == 0:
             raise PhysposeError(f"ground solref {self.ground_solref} mixes signs or is zero",
