@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import mujoco
 import numpy as np
 
-from physpose.errors import PhysposeError
+from physpose.errors import PhysposeError, expect_type
 from physpose.joints import JOINT_NAMES, LANDMARK_NAMES
 from physpose.scene import SceneConfig, add_scene
 from physpose.shape import HEAD_TOP_PER_EAR_WIDTH, BodyShape
@@ -212,6 +212,10 @@ def torque_limits(shape: BodyShape) -> np.ndarray:
 def build_body(shape: BodyShape, scene: SceneConfig = SceneConfig(),
                config: BodyConfig = BodyConfig()) -> Body:
     """Compile the body of ``shape`` standing in ``scene`` (rest pose, pelvis at the origin)."""
+    for value, kind, what, example in ((shape, BodyShape, "shape", "BodyShape.from_height(1.75)"),
+                                       (scene, SceneConfig, "scene", "SceneConfig()"),
+                                       (config, BodyConfig, "config", "BodyConfig()")):
+        expect_type(value, kind, f"build_body's {what}", f"pass e.g. {example}")
     spec = mujoco.MjSpec()
     spec.modelname = "physpose_body"
     spec.compiler.degree = False

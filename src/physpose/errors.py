@@ -31,6 +31,17 @@ class PhysposeError(Exception):
         super().__init__(text)
 
 
+def expect_type(value: object, kind: type | tuple[type, ...], what: str, remedy: str) -> None:
+    """PhysposeError unless `value` is a `kind`: at a stage's entry, so that a preset's name
+    given where its config belongs, or arguments in the wrong order, fail at once with the
+    remedy instead of an AttributeError deep inside (possibly after a long stage)."""
+    if not isinstance(value, kind):
+        names = " or ".join(k.__name__ for k in (kind if isinstance(kind, tuple) else (kind,)))
+        shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:37] + "..."
+        raise PhysposeError(f"{what} must be {names}, not {type(value).__name__} {shown}",
+                            remedy=remedy)
+
+
 @contextmanager
 def about(path: str | Path, remedy: str | None = None, *,
           instead_of: str | Path | None = None) -> Iterator[None]:

@@ -25,7 +25,7 @@ from physpose.cache import atomic_path
 from physpose.dynamics import PRESETS as DYNAMICS_PRESETS
 from physpose.dynamics import DynamicsConfig, PhysicsResult, optimize_dynamics
 from physpose.dynamics.optimize import MIN_FRAMES
-from physpose.errors import PhysposeError
+from physpose.errors import PhysposeError, expect_type
 from physpose.kinematics.config import KinematicConfig
 from physpose.kinematics.result import KinematicFit
 from physpose.keypoints_io import is_keypoints_file, load_keypoints
@@ -62,6 +62,14 @@ class PipelineConfig:
     slow_motion: float = 1.0
 
     def __post_init__(self) -> None:
+        for name, kind, example in (
+                ("observe", ObserveConfig, "ObserveConfig()"),
+                ("kinematics", KinematicConfig, "KinematicConfig.preset('SO+GT')"),
+                ("body", BodyConfig, "BodyConfig()"), ("scene", SceneConfig, "SceneConfig()"),
+                ("dynamics", DynamicsConfig, "physpose.dynamics.PRESETS['paper']")):
+            expect_type(getattr(self, name), kind, f"PipelineConfig.{name}",
+                        f"pass a config, e.g. {name}={example}, or use "
+                        "PipelineConfig.preset('fast' or 'paper', ...)")
         check_slow_motion(self.slow_motion)
 
     def footage_observe(self) -> ObserveConfig:
@@ -132,6 +140,8 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
     """
     from physpose.kinematics.fit import fit_kinematics, stderr_log  # noqa: PLC0415 (JAX)
 
+    expect_type(config, PipelineConfig, "reconstruct's config",
+                "pass PipelineConfig.preset('fast') or PipelineConfig.preset('paper')")
     out_dir = Path(out_dir)
     check_output_folder(out_dir)
     windows = out_dir / CHECKPOINT_FOLDER

@@ -43,6 +43,16 @@ def frame_runs(flags: np.ndarray) -> list[tuple[int, int]]:
                                                   np.flatnonzero(edges == -1))]
 
 
+MOTIONS = ("kinematic", "physics")  # the motions a reconstruction can hold
+
+
+def _check_motion(which: str) -> None:
+    """`which` names a motion, or is "best" (the physics where there is one)."""
+    if which != "best" and which not in MOTIONS:
+        raise PhysposeError(f"unknown motion {which!r}",
+                            remedy=f"use one of best, {', '.join(MOTIONS)}")
+
+
 @dataclass(frozen=True, eq=False)
 class Reconstruction:
     """World-frame motion (z up, ground z = 0, metres) at the analysis frame rate."""
@@ -130,6 +140,7 @@ class Reconstruction:
 
     def joints(self, which: str = "best") -> np.ndarray:
         """(T, J, 3) physics joints if present (or which='physics'), else kinematic."""
+        _check_motion(which)
         if which == "kinematic" or (which == "best" and not self.has_physics):
             return self.joints_kinematic
         if self.joints_physics is None:
@@ -141,6 +152,7 @@ class Reconstruction:
         """(T, 3) m: the camera's travel that a motion ('kinematic', 'physics' or 'best', as in
         `joints`) was filmed through: camera_travel_physics for the physics where the camera
         travelled with the person, None otherwise (a still camera)."""
+        _check_motion(motion)
         physics = motion == "physics" or (motion == "best" and self.has_physics)
         if not physics or self.camera_travel_physics is None:
             return None

@@ -12,18 +12,25 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from physpose.dynamics.balance import BalanceGains
 from physpose.dynamics.controller import ControllerGains
 from physpose.dynamics.ilqr import RefineConfig
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.dynamics.travel import CAMERA_SETTINGS
-from physpose.errors import PhysposeError
+from physpose.errors import PhysposeError, expect_type
 
 # Hinges whose targets CMA-ES varies (optimize.searched_dofs).
 SEARCH_SETS = ("all", "legs_trunk", "legs")
 # The refinement's keep ratio while it was fixed (stops 36-37): checkpoints made then have no
 # keep_ratio in their key, so only this value may leave it out, whatever the default becomes.
 UNKEYED_KEEP_RATIO = 1.5
+
+
+def _default(name: str) -> object:
+    """The default of a DynamicsConfig field (for remedies)."""
+    return DynamicsConfig.__dataclass_fields__[name].default
 
 
 @dataclass(frozen=True)
@@ -142,12 +149,33 @@ class DynamicsConfig:
     nthread: int = 2
 
     def __post_init__(self) -> None:
+        for name, kind in (("weights", ObjectiveWeights), ("controller", ControllerGains),
+                           ("balance", BalanceGains), ("refine", RefineConfig)):
+            expect_type(getattr(self, name), kind, f"dynamics config {name}",
+                        f"pass e.g. {name}={kind.__name__}(...)")
+        for name in ("popsize", "iterations", "parallel_windows", "nthread", "candidates",
+                     "searches", "retries", "seed"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise PhysposeError(f"dynamics config {name}={value!r} must be a whole number",
+                                    remedy=f"use e.g. {name}={_default(name)}")
         positive = ("window", "knot_spacing", "reference_knot_spacing", "sigma0",
                     "max_root_distance", "max_penetration")
         for name in positive:
             if not getattr(self, name) > 0:
                 raise PhysposeError(f"dynamics config {name}={getattr(self, name)} must be > 0",
                                     remedy="use a preset (fast or paper) or positive values")
+        for name in ("window", "knot_spacing", "reference_knot_spacing", "sigma0"):
+            if not math.isfinite(getattr(self, name)):
+                raise PhysposeError(f"dynamics config {name}={getattr(self, name)} must be "
+                                    "finite", remedy="use a preset (fast or paper)")
+        for name in ("contact_height", "ground_snap"):
+            if not getattr(self, name) >= 0:
+                raise PhysposeError(f"dynamics config {name}={getattr(self, name)} must be >= 0",
+                                    remedy="use e.g. 0.03 (m)")
+        if self.popsize < 2:
+            raise PhysposeError(f"dynamics popsize {self.popsize} must be >= 2 (CMA-ES ranks "
+                                "its samples)", remedy="use e.g. popsize=24")
         if not 0 <= self.overlap < self.window:
             raise PhysposeError(f"dynamics overlap {self.overlap} s must be in [0, window)",
                                 remedy="choose an overlap shorter than the window")
@@ -291,6 +319,7 @@ def ablated(config: DynamicsConfig, name: str) -> DynamicsConfig:
     objective and, where the refinement is on, their counterparts in its tracking cost
     (REFINE_COUNTERPARTS): without them a refined ``no2d`` would still be pulled onto the
     detections."""
+    expect_type(config, DynamicsConfig, "ablated's config", "pass e.g. PRESETS['fast']")
     if name not in ABLATIONS:
         raise PhysposeError(f"unknown ablation {name!r}", remedy=f"use one of {list(ABLATIONS)}")
     terms = ABLATIONS[name]

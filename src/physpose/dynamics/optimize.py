@@ -52,7 +52,7 @@ from physpose.dynamics.controller import track_reference
 from physpose.dynamics.ilqr import ImageTerm, camera_centres, refine_targets
 from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
                                        score, step_position, window_over)
-from physpose.errors import PhysposeError
+from physpose.errors import PhysposeError, expect_type
 from physpose.reconstruction import restart_frames
 from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
@@ -536,6 +536,12 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
     checkpoint_dir: root of the run folders (default: the stage cache); checkpoints=False
     writes and reads none. progress: a tqdm bar per window on stderr.
     """
+    for value, kind, what, remedy in (
+            (body, Body, "body", "pass build_body(kinematic_fit.shape, scene)"),
+            (kinematic_fit, KinematicFit, "kinematic_fit", "pass fit_kinematics(observations)"),
+            (observations, Observations, "observations", "pass the fit's observations"),
+            (config, DynamicsConfig, "config", "pass e.g. physpose.dynamics.PRESETS['fast']")):
+        expect_type(value, kind, f"optimize_dynamics' {what}", remedy)
     _check_inputs(kinematic_fit, observations)
     timing: dict[str, float] = {}
     t0 = time.perf_counter()

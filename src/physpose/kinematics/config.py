@@ -27,6 +27,12 @@ class CameraConfig:
     refine_focal: bool = False       # optimise the focal length with the poses (weakly observable)
     focal_log_sigma: float = 0.25    # prior sigma of log(focal) when refined
 
+    def __post_init__(self) -> None:
+        if not 1.0 <= self.diagonal_fov_deg <= 170.0:
+            raise PhysposeError(f"diagonal field of view {self.diagonal_fov_deg} degrees is "
+                                "outside 1-170", remedy="use e.g. 55 (a phone's main camera), "
+                                "or give the camera's intrinsics with --camera")
+
 
 @dataclass(frozen=True)
 class ShapeConfig:

@@ -30,6 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from physpose import diagnostics, supports
 from physpose.cache import Cache, stage_key
+from physpose.errors import expect_type
 from physpose.paths import cache_dir
 from physpose.fk import fk_qpos, segment_frames
 from physpose.kinematics import camera as cam
@@ -77,6 +78,11 @@ def fit_kinematics(observations: Observations, config: KinematicConfig = Kinemat
     camera_K (3, 3) overrides the observations' intrinsics. Results are cached by observations,
     config and these arguments (config.use_cache).
     """
+    expect_type(observations, Observations, "fit_kinematics' observations",
+                "pass Observations, e.g. physpose.pipeline.load_observations(path, "
+                "ObserveConfig())")
+    expect_type(config, KinematicConfig, "fit_kinematics' config",
+                "pass e.g. KinematicConfig.preset('SO+GT')")
     K = camera_K if camera_K is not None else observations.camera_K
     if height is not None:
         BodyShape.from_height(height, mass)  # range checks with a clear message

@@ -151,6 +151,9 @@ def motion_from_tree(name: str, source: str, times: np.ndarray, names: list[str]
     rest_pos: (N, 3) node positions with all rotations zero.
     A rest pose held before the motion and joined to it by a jump is left out (`leading_jump`).
     """
+    if len(times) < 2:
+        raise PhysposeError(f"{len(times)} frame{'s' * (len(times) != 1)} of motion: nothing "
+                            "moves", path=source, remedy="use a clip of at least two frames")
     dropped = leading_jump(pos, times)
     times, pos, rot = times[dropped:], pos[dropped:], rot[dropped:]
     norm = [_normalise(n) for n in names]

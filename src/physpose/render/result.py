@@ -7,9 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from physpose.errors import PhysposeError
-from physpose.reconstruction import Reconstruction
+from physpose.reconstruction import MOTIONS, Reconstruction
 
-MOTIONS = ("kinematic", "physics")
 _RESULT_REMEDY = "pass the folder written by `physpose reconstruct` (it holds reconstruction.npz)"
 
 
