@@ -14,7 +14,7 @@ from physpose.body import build_body
 from physpose.dynamics import PRESETS, ablated, optimize_dynamics
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.errors import PhysposeError
-from physpose.kinematics.config import CameraConfig
+from physpose.kinematics.config import CameraConfig, GroundConfig, PoseConfig, PoseWeights
 from physpose.kinematics.fit import fit_kinematics
 from physpose.mocap import load_mocap
 from physpose.pipeline import PipelineConfig, reconstruct
@@ -56,6 +56,13 @@ def test_arguments_in_the_wrong_place_are_named(clip):
         build_body(1.75)
 
 
+def test_a_body_of_other_bones_than_the_fit_is_refused(clip):
+    _, fit, obs = clip  # (a 1.5 m body had run on a 1.75 m fit: window loss 7.18, not 0.04)
+    with pytest.raises(PhysposeError, match="bones differ from the kinematic fit's by up to"):
+        optimize_dynamics(build_body(BodyShape.from_height(1.5)), fit, obs, PRESETS["fast"],
+                          checkpoints=False)
+
+
 @pytest.mark.parametrize("change, match", [
     (dict(popsize=1), "popsize 1 must be >= 2"),
     (dict(window=float("inf")), "window=inf must be finite"),
@@ -68,6 +75,16 @@ def test_arguments_in_the_wrong_place_are_named(clip):
 def test_impossible_dynamics_settings_are_refused_when_configured(change, match):
     with pytest.raises(PhysposeError, match=match):
         dataclasses.replace(PRESETS["fast"], **change)
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda: PoseWeights(reprojection=-1.0), "PoseWeights.reprojection=-1.0 must be finite"),
+    (lambda: PoseConfig(sigma_2d=0.0), "PoseConfig.sigma_2d=0.0 must be finite and > 0"),
+    (lambda: GroundConfig(rounds=0), "GroundConfig.rounds=0 must be at least 1"),
+])
+def test_impossible_kinematic_settings_are_refused(make, match):
+    with pytest.raises(PhysposeError, match=match):
+        make()
 
 
 @pytest.mark.parametrize("fov", [0.0, -55.0, 180.0, float("nan")])

@@ -96,6 +96,16 @@ def _check_inputs(kin: KinematicFit, obs: Observations) -> None:
                             frame=int(bad[0]), remedy="re-run the kinematic fit")
 
 
+def _check_body(body: Body, kin: KinematicFit, tolerance: float = 0.005) -> None:
+    """The body must have the fit's bones: the estimate's joint angles only put the body's
+    landmarks where the fit's were with the same segment lengths (its mass may differ)."""
+    off = np.abs(body.shape.bones() - kin.shape.bones())
+    if off.max() > tolerance:
+        raise PhysposeError(f"the body's bones differ from the kinematic fit's by up to "
+                            f"{100 * off.max():.1f} cm", remedy="build the body from the fit's "
+                            "shape: build_body(kinematic_fit.shape, scene)")
+
+
 def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsConfig) -> _Setup:
     fps, dt = kin.fps, sim.dt
     windows = plan_windows(kin.num_frames, fps, dt, cfg.window, cfg.overlap,
@@ -543,6 +553,7 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
             (config, DynamicsConfig, "config", "pass e.g. physpose.dynamics.PRESETS['fast']")):
         expect_type(value, kind, f"optimize_dynamics' {what}", remedy)
     _check_inputs(kinematic_fit, observations)
+    _check_body(body, kinematic_fit)
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     sim = sim_model(body)
