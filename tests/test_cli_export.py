@@ -6,6 +6,7 @@ import pytest
 
 import physpose.report as report
 from physpose.cli import main
+from physpose.errors import PhysposeError
 from synthetic_result import save_result
 
 
@@ -29,6 +30,22 @@ def test_export_to_a_chosen_file(results, tmp_path):
     out = tmp_path / "deep" / "walk.bvh"
     assert main(["export", str(results["kinematic"]), "-f", "bvh", "--out", str(out)]) == 0
     assert out.read_text().startswith("HIERARCHY")
+
+
+def test_export_into_a_folder_writes_the_default_name_there(results, tmp_path):
+    # (a folder as --out had failed with IsADirectoryError)
+    assert main(["export", str(results["kinematic"]), "-f", "csv", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "joints.csv").read_text().startswith("frame")
+
+
+def test_export_of_a_reconstruction_in_memory_says_to_save_it_first(results):
+    from physpose.export import export
+    from physpose.reconstruction import Reconstruction
+
+    rec = Reconstruction.load(results["kinematic"])
+    with pytest.raises(PhysposeError, match="export's result must be str or Path, not "
+                                            "Reconstruction.*save it into one first"):
+        export(rec, "bvh")
 
 
 def test_overlay_video_and_png(results, tmp_path, capsys):

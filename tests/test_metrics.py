@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from physpose import metrics as m
+from physpose.errors import PhysposeError
 from physpose.joints import JOINT_INDEX, JOINT_NAMES
 
 FPS = 25.0
@@ -218,3 +219,16 @@ def test_project_matches_pinhole_model():
 def test_shape_mismatch_is_rejected():
     with pytest.raises(ValueError):
         m.mpjpe(np.zeros((3, 21, 3)), np.zeros((4, 21, 3)))
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(est=np.zeros((5, 33, 3)).tolist()), "33 joints given for 21 joint names"),
+    (dict(fps=0.0), "frame rate 0.0 must be positive"),
+    (dict(est_2d=np.zeros((5, 21, 2))), "needs both est_2d and target_2d"),
+])
+def test_evaluate_refuses_what_it_would_score_wrongly(kwargs, match):
+    # (landmarks had been scored as joints, a zero rate gave a jitter of 0, and a lone est_2d
+    # dropped MPJPE-2d without a word)
+    args = dict(est=np.zeros((5, 21, 3)), fps=25.0) | kwargs
+    with pytest.raises(PhysposeError, match=match):
+        m.evaluate(args.pop("est"), **args)

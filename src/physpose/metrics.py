@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from physpose.errors import PhysposeError
 from physpose.joints import JOINT_NAMES
 
 SKATE_DISTANCE = 0.02  # m, a foot in contact moving further than this between frames skates
@@ -251,7 +252,18 @@ def evaluate(est: np.ndarray, gt: np.ndarray | None = None, *, fps: float,
     fall_reference: (T, J, 3) motion (own world frame) that `fallen_pct` compares head heights
     with; defaults to gt (both in their own world frames).
     """
+    est = np.asarray(est, dtype=float)
+    gt = None if gt is None else np.asarray(gt, dtype=float)
     _check(est)
+    if est.shape[1] != len(joint_names):
+        raise PhysposeError(f"{est.shape[1]} joints given for {len(joint_names)} joint names",
+                            remedy="pass joints in joint_names' order (JOINT_NAMES: "
+                                   "Reconstruction.joints(), not landmarks)")
+    if not (np.isfinite(fps) and fps > 0):
+        raise PhysposeError(f"frame rate {fps} must be positive", remedy="pass the motion's fps")
+    if (est_2d is None) != (target_2d is None):
+        raise PhysposeError("MPJPE-2d needs both est_2d and target_2d",
+                            remedy="pass both, or neither")
     out: dict[str, float] = {}
     if gt is not None:
         a = est if T_est2common is None else transform_points(T_est2common, est)

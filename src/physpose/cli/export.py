@@ -27,8 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--format", "-f", required=True, choices=FORMATS, dest="fmt",
                    help="file format")
     p.add_argument("--out", "-o", type=Path, default=None,
-                   help="output file (default: RESULT_DIR/" + ", ".join(
-                       f"{n} for {f}" for f, n in DEFAULT_NAMES.items()) + ")")
+                   help="output file, or a folder to write the default name into (default: "
+                        "RESULT_DIR/" + ", ".join(
+                            f"{n} for {f}" for f, n in DEFAULT_NAMES.items()) + ")")
     p.add_argument("--motion", choices=MOTIONS, default=None,
                    help="which motion (default: physics if present, else kinematic; csv/json "
                         "default to all motions)")

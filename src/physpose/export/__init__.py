@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from physpose.errors import PhysposeError
+from physpose.errors import PhysposeError, expect_type
 from physpose.export.bvh import write_bvh
 from physpose.export.gltf import write_glb
 from physpose.export.table import write_csv, write_forces_csv, write_json
@@ -30,8 +30,13 @@ def export(result_dir: str | Path, fmt: str, out: str | Path | None = None,
     if fmt not in FORMATS:
         raise PhysposeError(f"unknown export format {fmt!r}",
                             remedy=f"choose one of {', '.join(FORMATS)}")
+    expect_type(result_dir, (str, Path), "export's result", "pass the result folder (a "
+                "Reconstruction in memory: save it into one first, rec.save(folder / "
+                "'reconstruction.npz'))")
     rec, folder = load_result(result_dir)
-    out = Path(out) if out is not None else folder / DEFAULT_NAMES[fmt]
+    out = folder if out is None else Path(out)
+    if out.is_dir():  # a folder: the format's default name inside it
+        out = out / DEFAULT_NAMES[fmt]
     if fmt == "forces":
         if motion == "kinematic":
             raise PhysposeError("only the physics motion has forces", path=folder,
