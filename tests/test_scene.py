@@ -52,6 +52,12 @@ def test_impossible_scenes_are_refused_when_configured(change, match):
         SceneConfig(**change)
 
 
+def test_a_box_yaw_in_degrees_is_refused():
+    with pytest.raises(PhysposeError, match=r"Box takes radians.*math.radians\(90\)"):
+        Box(center=(0, 0, 0.2), size=(1, 1, 0.4), yaw=90.0)
+    assert Box(center=(0, 0, 0.2), size=(1, 1, 0.4), yaw=-math.pi).yaw == -math.pi
+
+
 def test_scene_settings_reach_the_model():
     box = Box(center=(1.0, -0.5, 0.1), size=(0.4, 0.6, 0.2), yaw=math.radians(30))
     scene = SceneConfig(ground_friction=0.4, obstacles=(box,)).with_ground(stiffness=900.0)

@@ -14,7 +14,7 @@ import numpy as np
 
 from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
-from physpose.npz_io import read_npz, write_npz
+from physpose.npz_io import write_npz
 
 FORMAT_VERSION = 1
 CAMERA_MOTIONS = ("static", "turning", "moving")   # what `Observations.camera_motion` can say
@@ -89,32 +89,14 @@ class Observations:
 
     @classmethod
     def load(cls, path: str | Path) -> "Observations":
-        path = Path(path)
-        if not path.is_file():
+        """Read observations written by `save` (or any keypoints file, docs/keypoints_format.md):
+        the keypoints reader's checks, with errors naming the file and frame."""
+        from physpose.keypoints_io import load_keypoints  # noqa: PLC0415 (it imports this)
+
+        if not Path(path).is_file():
             raise PhysposeError("observations file not found", path=path,
                                 remedy="run `physpose observe VIDEO --out DIR` first")
-        d = read_npz(path, what="observations", remedy="re-create it with `physpose observe`")
-        missing = {"fps", "image_size", "timestamps", "keypoints2d", "detected",
-                   "interpolated"} - d.keys()
-        if missing:
-            raise PhysposeError(f"observations npz lacks keys {sorted(missing)}", path=path,
-                                remedy="re-create it with `physpose observe`")
-        return cls(
-            source=str(d.get("source", str(path))),
-            fps=float(d["fps"]),
-            image_size=tuple(int(v) for v in d["image_size"]),
-            timestamps=d["timestamps"],
-            keypoints2d=d["keypoints2d"],
-            detected=d["detected"].astype(bool),
-            interpolated=d["interpolated"].astype(bool),
-            world_landmarks=d.get("world_landmarks"),
-            masks=d.get("masks"),
-            camera_K=d.get("camera_K"),
-            frame_indices=d.get("frame_indices"),
-            homographies=d.get("homographies"),
-            camera_motion=None if "camera_motion" not in d else str(d["camera_motion"]),
-            unsure=None if "unsure" not in d else d["unsure"].astype(bool),
-        )
+        return load_keypoints(path)
 
     def on_real_clock(self, slow_motion: float) -> "Observations":
         """These observations timed as the filmed motion happened, where the footage plays

@@ -54,6 +54,10 @@ class Box:
             raise PhysposeError(f"box sizes must be positive, got {self.size}",
                                 remedy="give full side lengths in metres: "
                                        "box:x,y,z,sx,sy,sz[,yaw_deg]")
+        if abs(self.yaw) > 2 * math.pi:
+            raise PhysposeError(f"box yaw {self.yaw:g} is more than a full turn: Box takes "
+                                "radians", remedy=f"use yaw=math.radians({self.yaw:g}) (the "
+                                "command line's box:...,yaw_deg takes degrees)")
 
     def spec(self) -> str:
         """The box as `parse_obstacle` (and --obstacle) reads it, centimetre precision."""
@@ -151,8 +155,10 @@ def parse_obstacle(text: str) -> Box:
     except ValueError:
         raise PhysposeError(f"obstacle {text!r} contains a value that is not a number",
                             remedy=remedy) from None
-    return Box(center=(v[0], v[1], v[2]), size=(v[3], v[4], v[5]),
-               yaw=math.radians(v[6]) if len(v) == 7 else 0.0)
+    yaw_deg = v[6] if len(v) == 7 else 0.0
+    if math.isfinite(yaw_deg):
+        yaw_deg = math.remainder(yaw_deg, 360.0)  # any number of turns
+    return Box(center=(v[0], v[1], v[2]), size=(v[3], v[4], v[5]), yaw=math.radians(yaw_deg))
 
 
 def add_scene(spec: mujoco.MjSpec, scene: SceneConfig) -> None:
