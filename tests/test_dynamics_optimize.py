@@ -17,7 +17,7 @@ from physpose.dynamics.optimize import foot_heights, reference_motion, searched_
 from physpose.dynamics.search import cma_strategy, window_seed
 from physpose.dynamics.spline import KnotGrid
 from physpose.dynamics.synthetic import simulated_clip
-from physpose.dynamics.windows import blend_weights, plan_windows, window_over
+from physpose.dynamics.windows import blend_weights, plan_windows
 from physpose.errors import PhysposeError
 from physpose.shape import BodyShape
 from physpose.skeleton import DOF_NAMES
@@ -284,22 +284,6 @@ def test_independent_windows_are_blended(clip):
     weights = blend_weights(wins, 41)
     np.testing.assert_allclose(weights.sum(axis=0), 1.0)
     assert wins[-1].last == 40 and wins[-1].last - wins[-1].first == 10
-
-
-def test_blend_weights_fade_every_window_out_towards_its_edges():
-    def windows(*spans):
-        return [window_over(i, a, b, 25.0, 0.005) for i, (a, b) in enumerate(spans)]
-
-    # Two windows at a time: linear cross-fades.
-    weights = blend_weights(windows((0, 4), (2, 7), (5, 9)), 10)
-    np.testing.assert_allclose(weights[1], [0, 0, 1 / 4, 2 / 4, 3 / 4, 3 / 4, 2 / 4, 1 / 4, 0, 0])
-    np.testing.assert_allclose(weights[0, :5], [1, 1, 3 / 4, 2 / 4, 1 / 4])
-    # The last, anchored window reaches back past its predecessor into the first window:
-    # every window is weighted by its own distance to its edge.
-    weights = blend_weights(windows((0, 6), (3, 9), (5, 9)), 10)
-    np.testing.assert_allclose(weights.sum(axis=0), 1.0)
-    np.testing.assert_allclose(weights[0, 4:8], [3 / 5, 2 / 6, 1 / 7, 0])
-    np.testing.assert_allclose(weights[:, 9], [0, 7 / 12, 5 / 12])
 
 
 @pytest.mark.parametrize("fps", [24.0, 25.0, 29.97, 30.0, 60.0])

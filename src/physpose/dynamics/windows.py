@@ -155,18 +155,18 @@ def ranked_fitness(scores: Scores, num_frames: int) -> np.ndarray:
 
 
 def blend_weights(windows: list[Window], num_frames: int) -> np.ndarray:
-    """(W, T) weights joining independently optimised windows, each frame's summing to 1.
-
-    A window's weight at a frame is its distance in frames (plus one) to its nearest edge
-    inside the clip; an edge at the clip's first or last frame does not count. Where two
-    windows overlap this is a linear cross-fade; where three do (the last, anchored window
-    can reach back past its predecessor) the one rule weighs all three.
-    """
+    """(W, T) weights joining independently optimised windows: linear cross-fades where
+    windows overlap, each frame's weights summing to 1."""
     w = np.zeros((len(windows), num_frames))
     for i, win in enumerate(windows):
-        frames = np.arange(win.first, win.last + 1, dtype=float)
-        from_first = frames - win.first + 1 if win.first > 0 else np.full_like(frames, num_frames)
-        to_last = win.last - frames + 1 if win.last < num_frames - 1 else \
-            np.full_like(frames, num_frames)
-        w[i, win.first:win.last + 1] = np.minimum(from_first, to_last)
+        ramp = np.ones(win.last - win.first + 1)
+        if i > 0:
+            n = windows[i - 1].last - win.first + 1
+            if n > 0:
+                ramp[:n] = np.minimum(ramp[:n], (np.arange(n) + 1.0) / (n + 1.0))
+        if i + 1 < len(windows):
+            n = win.last - windows[i + 1].first + 1
+            if n > 0:
+                ramp[-n:] = np.minimum(ramp[-n:], (n - np.arange(n)) / (n + 1.0))
+        w[i, win.first:win.last + 1] = ramp
     return w / w.sum(axis=0, keepdims=True)
