@@ -43,7 +43,7 @@ def test_export_of_a_reconstruction_in_memory_says_to_save_it_first(results):
     from physpose.reconstruction import Reconstruction
 
     rec = Reconstruction.load(results["kinematic"])
-    with pytest.raises(PhysposeError, match="export's result must be str or Path, not "
+    with pytest.raises(PhysposeError, match="export's result must be str or PathLike, not "
                                             "Reconstruction.*save it into one first"):
         export(rec, "bvh")
 

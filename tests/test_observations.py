@@ -124,3 +124,33 @@ def test_keypoints_normalised_to_0_1_are_refused_with_the_scaling():
     unsure = normalised.copy()
     unsure[..., 2] = 0.1  # too unsure to tell: left to the later checks
     assert _obs(keypoints2d=unsure).num_frames == 4
+
+
+@pytest.mark.parametrize("name", ["o", "o.data"])
+def test_saved_under_any_name_and_loaded_back(tmp_path, name):
+    obs = _obs()
+    back = Observations.load(obs.save(tmp_path / name))
+    np.testing.assert_array_equal(back.keypoints2d, obs.keypoints2d)
+
+
+def test_a_hand_made_file_with_an_odd_frame_rate_is_named(tmp_path):
+    obs = _obs()
+    fields = dict(fps=np.array([25.0, 25.0]), image_size=np.array(obs.image_size),
+                  timestamps=obs.timestamps, keypoints2d=obs.keypoints2d,
+                  detected=obs.detected, interpolated=obs.interpolated)
+    np.savez(tmp_path / "hand.npz", **fields)
+    with pytest.raises(PhysposeError, match=r"hand\.npz: fps .* is not a frame rate"):
+        Observations.load(tmp_path / "hand.npz")
+
+
+def test_keypoints_mapped_into_a_wide_pans_middle_view_load_back(tmp_path):
+    # A turning camera's keypoints live in the middle frame's image, which a pan of +-50
+    # degrees stretches from about -2 to +2 pictures: observe's own file must load.
+    kp = _obs().keypoints2d.copy()
+    kp[0, :, 0] -= 2000.0
+    kp[3, :, 0] += 2500.0
+    kp[..., 2] = 0.9
+    obs = _obs(keypoints2d=kp, homographies=np.repeat(np.eye(3)[None], 4, axis=0),
+               camera_motion="turning")
+    back = Observations.load(obs.save(tmp_path / "o.npz"))
+    np.testing.assert_array_equal(back.keypoints2d, kp)

@@ -52,10 +52,18 @@ def test_impossible_scenes_are_refused_when_configured(change, match):
         SceneConfig(**change)
 
 
+def test_obstacles_as_a_list_are_kept_as_a_tuple():
+    box = Box(center=(0, 0, 0.2), size=(1, 1, 0.4))
+    assert SceneConfig(obstacles=[box]).obstacles == (box,)
+    assert SceneConfig(obstacles=[]).obstacles == ()
+
+
 def test_a_box_yaw_in_degrees_is_refused():
     with pytest.raises(PhysposeError, match=r"Box takes radians.*math.radians\(90\)"):
         Box(center=(0, 0, 0.2), size=(1, 1, 0.4), yaw=90.0)
     assert Box(center=(0, 0, 0.2), size=(1, 1, 0.4), yaw=-math.pi).yaw == -math.pi
+    turns = parse_obstacle("box:0,0,0.2,1,1,0.4,450")  # degrees, any number of turns
+    assert turns.yaw == pytest.approx(math.pi / 2)
 
 
 def test_scene_settings_reach_the_model():

@@ -38,13 +38,18 @@ def load_keypoints(path: str | Path) -> Observations:
         raise PhysposeError("keypoints file not found", path=path, remedy="check the path")
     ext = path.suffix.lower()
     if ext == ".json":
-        raw = _read_json(path)
-    elif ext == ".npz":
-        raw = _read_npz(path)
-    else:
-        raise PhysposeError(f"unknown keypoints extension '{ext}'", path=path,
-                            remedy="use .json or .npz (" + _DOC + ")")
-    return _to_observations(raw, path)
+        return _to_observations(_read_json(path), path)
+    if ext == ".npz":
+        return load_keypoints_npz(path)
+    raise PhysposeError(f"unknown keypoints extension '{ext}'", path=path,
+                        remedy="use .json or .npz (" + _DOC + ")")
+
+
+def load_keypoints_npz(path: str | Path) -> Observations:
+    """Read a keypoints npz file whatever its name ends with (`Observations.save` writes to
+    exactly the path it is given)."""
+    path = Path(path)
+    return _to_observations(_read_npz(path), path)
 
 
 def save_keypoints(obs: Observations, path: str | Path) -> Path:
@@ -135,8 +140,11 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
              "scale confidences to [0, 1]", f)
     # A joint the detector is sure of lies in the picture or near it, never a whole picture
     # away (MediaPipe guesses joints out of view far away, but with a visibility near 0).
+    # Keypoints mapped into the middle frame's image of a turning camera (homographies) can lie
+    # anywhere a wide pan reaches, so they are not held to this.
     far = (conf >= SURE_CONFIDENCE) & ((kp[..., 0] < -size[0]) | (kp[..., 0] > 2 * size[0])
                                        | (kp[..., 1] < -size[1]) | (kp[..., 1] > 2 * size[1]))
+    far &= raw.get("homographies") is None
     if far.any():
         f = int(np.argmax(far.any(axis=1)))
         x, y = kp[f][far[f]][0, :2]

@@ -89,14 +89,14 @@ class Observations:
 
     @classmethod
     def load(cls, path: str | Path) -> "Observations":
-        """Read observations written by `save` (or any keypoints file, docs/keypoints_format.md):
-        the keypoints reader's checks, with errors naming the file and frame."""
-        from physpose.keypoints_io import load_keypoints  # noqa: PLC0415 (it imports this)
+        """Read observations written by `save` (a keypoints npz file, docs/keypoints_format.md,
+        whatever its name ends with), with the keypoints reader's checks and errors."""
+        from physpose.keypoints_io import load_keypoints_npz  # noqa: PLC0415 (it imports this)
 
         if not Path(path).is_file():
             raise PhysposeError("observations file not found", path=path,
                                 remedy="run `physpose observe VIDEO --out DIR` first")
-        return load_keypoints(path)
+        return load_keypoints_npz(path)
 
     def on_real_clock(self, slow_motion: float) -> "Observations":
         """These observations timed as the filmed motion happened, where the footage plays

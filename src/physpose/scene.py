@@ -91,6 +91,8 @@ class SceneConfig:
         if not (math.isfinite(self.gravity) and self.gravity > 0):
             raise PhysposeError(f"gravity {self.gravity} must be a positive magnitude (m/s^2; "
                                 "it points down, -z)", remedy=f"use e.g. {GRAVITY}")
+        if isinstance(self.obstacles, list):  # as good as a tuple, and kept as one
+            object.__setattr__(self, "obstacles", tuple(self.obstacles))
         if not isinstance(self.obstacles, tuple) or \
                 not all(isinstance(box, Box) for box in self.obstacles):
             raise PhysposeError(f"obstacles must be a tuple of Box, not {self.obstacles!r}",

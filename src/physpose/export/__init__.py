@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from physpose.errors import PhysposeError, expect_type
@@ -30,7 +31,7 @@ def export(result_dir: str | Path, fmt: str, out: str | Path | None = None,
     if fmt not in FORMATS:
         raise PhysposeError(f"unknown export format {fmt!r}",
                             remedy=f"choose one of {', '.join(FORMATS)}")
-    expect_type(result_dir, (str, Path), "export's result", "pass the result folder (a "
+    expect_type(result_dir, (str, os.PathLike), "export's result", "pass the result folder (a "
                 "Reconstruction in memory: save it into one first, rec.save(folder / "
                 "'reconstruction.npz'))")
     rec, folder = load_result(result_dir)
