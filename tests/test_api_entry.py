@@ -17,6 +17,7 @@ from physpose.errors import PhysposeError
 from physpose.kinematics.config import CameraConfig, GroundConfig, PoseConfig, PoseWeights
 from physpose.kinematics.fit import fit_kinematics
 from physpose.mocap import load_mocap
+from physpose.observe import ObserveConfig
 from physpose.pipeline import PipelineConfig, reconstruct
 from physpose.shape import BodyShape
 
@@ -110,3 +111,15 @@ def test_a_misspelt_motion_is_refused_not_read_as_the_physics():
             rec.joints(name)  # had returned the physics joints
         with pytest.raises(PhysposeError, match="use one of best, kinematic, physics"):
             rec.camera_travel(name)
+
+
+def test_a_reconstruction_without_a_positive_rate_is_refused():
+    rec = make_reconstruction(num_frames=10)
+    with pytest.raises(PhysposeError, match="frame rate 0.0 must be positive"):
+        rec.replace(fps=0.0)
+
+
+def test_an_analysis_rate_out_of_range_is_refused_when_configured():
+    # (with --slow-motion it had been clamped into range without a word)
+    with pytest.raises(PhysposeError, match="target frame rate -25 fps is outside 1-240"):
+        ObserveConfig(target_fps=-25.0)

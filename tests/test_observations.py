@@ -55,6 +55,8 @@ def test_nan_keypoints_name_file_and_frame():
     (dict(unsure=np.zeros(5, bool)), "unsure has shape"),
     (dict(unsure=np.array([0, 2, 0, 0])), "expected \\(4,\\) bool"),
     (dict(detected=np.ones(4, int)), "detected has type int64, expected bool"),
+    (dict(image_size=(float("nan"), 480)), "image size"),
+    (dict(frame_indices=np.arange(5)), "frame_indices has shape \\(5,\\), expected \\(4,\\)"),
     (dict(interpolated=np.zeros(4)), "interpolated has type float64, expected bool"),
 ])
 def test_malformed_fields_are_rejected(change, message):

@@ -161,7 +161,7 @@ def validate(obs: Observations) -> None:
 
     if not (np.isfinite(obs.fps) and 0.5 <= obs.fps <= 1000):
         fail(f"frame rate {obs.fps} Hz is outside 0.5-1000 Hz")
-    if len(obs.image_size) != 2 or min(obs.image_size) <= 0:
+    if len(obs.image_size) != 2 or not all(np.isfinite(v) and v > 0 for v in obs.image_size):
         fail(f"image size {obs.image_size} must be (width, height) in positive pixels")
     kp = np.asarray(obs.keypoints2d)
     if kp.ndim != 3 or kp.shape[1:] != (NUM_LANDMARKS, 3):
@@ -169,9 +169,10 @@ def validate(obs: Observations) -> None:
     t = kp.shape[0]
     if t == 0:
         fail("no frames")
-    for name in ("timestamps", "detected", "interpolated"):
-        if np.asarray(getattr(obs, name)).shape != (t,):
-            fail(f"{name} has shape {np.asarray(getattr(obs, name)).shape}, expected ({t},)")
+    for name in ("timestamps", "detected", "interpolated", "frame_indices"):
+        value = getattr(obs, name)
+        if value is not None and np.asarray(value).shape != (t,):
+            fail(f"{name} has shape {np.asarray(value).shape}, expected ({t},)")
     for name in ("detected", "interpolated"):  # integer flags would index frames, not mask them
         if np.asarray(getattr(obs, name)).dtype != bool:
             fail(f"{name} has type {np.asarray(getattr(obs, name)).dtype}, expected bool",

@@ -124,6 +124,7 @@ class ObserveConfig:
         if not (math.isfinite(self.unsure_mask_band) and self.unsure_mask_band >= 0):
             bad(f"unsure_mask_band={self.unsure_mask_band} is not a width",
                 "use a non-negative number of mask pixels (0 keeps every detection)")
+        videolib.check_target_fps(self.target_fps)
 
 
 @dataclass(frozen=True)

@@ -83,6 +83,9 @@ class Reconstruction:
     meta: dict = dataclasses.field(default_factory=dict)  # JSON-able extras (config, timings)
 
     def __post_init__(self) -> None:
+        if not (np.isfinite(self.fps) and self.fps > 0):
+            raise PhysposeError(f"reconstruction frame rate {self.fps} must be positive",
+                                remedy="give the rate of the motion's frames")
         t = self.joints_kinematic.shape[0]
         j = len(self.joint_names)
         checks = {

@@ -115,13 +115,18 @@ def probe(path: str | Path) -> VideoInfo:
     return VideoInfo(path=path, fps=fps, frame_count=count, width=width, height=height)
 
 
-def plan_frames(info: VideoInfo, target_fps: float = 25.0, start: float | None = None,
-                end: float | None = None) -> FramePlan:
-    """Pick the source frame nearest each target timestamp start + k / fps, start <= t < end."""
+def check_target_fps(target_fps: float) -> None:
+    """PhysposeError unless the analysis rate asked for is in the accepted range."""
     if not (math.isfinite(target_fps) and MIN_TARGET_FPS <= target_fps <= MAX_TARGET_FPS):
         raise PhysposeError(f"target frame rate {target_fps:g} fps is outside "
                             f"{MIN_TARGET_FPS:g}-{MAX_TARGET_FPS:g} fps",
                             remedy="pass e.g. --fps 25 (the paper's rate)")
+
+
+def plan_frames(info: VideoInfo, target_fps: float = 25.0, start: float | None = None,
+                end: float | None = None) -> FramePlan:
+    """Pick the source frame nearest each target timestamp start + k / fps, start <= t < end."""
+    check_target_fps(target_fps)
     duration = info.duration
     t0 = 0.0 if start is None else float(start)
     t1 = duration if end is None else float(end)
