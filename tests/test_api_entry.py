@@ -65,7 +65,7 @@ def test_a_body_of_other_bones_than_the_fit_is_refused(clip):
 
 
 @pytest.mark.parametrize("change, match", [
-    (dict(popsize=1), "popsize 1 must be >= 2"),
+    (dict(popsize=1), "DynamicsConfig.popsize=1 must be at least 2"),
     (dict(window=float("inf")), "window=inf must be finite"),
     (dict(iterations=20.0), "iterations=20.0 must be a whole number"),
     (dict(seed=True), "seed=True must be a whole number"),

@@ -13,6 +13,7 @@ from physpose.dynamics.objective import (FOOT_LANDMARKS, TERMS, ObjectiveWeights
 from physpose.dynamics.rollout import FrameSamples
 from physpose.dynamics.synthetic import virtual_camera
 from physpose.dynamics.windows import Scores, ranked_fitness
+from physpose.errors import PhysposeError
 from physpose.fk import fk_mujoco
 from physpose.shape import BodyShape
 from physpose.skeleton import DOF_LIMITS, DOF_NAMES
@@ -174,7 +175,7 @@ def test_weights_skip_terms_and_total_is_the_weighted_sum(scene):
     assert terms["pose"][0] == 0.0 and terms["com"][0] > 0
     assert total(terms, weights)[0] == pytest.approx(
         sum(getattr(weights, n) * terms[n][0] for n in TERMS))
-    with pytest.raises(ValueError):
+    with pytest.raises(PhysposeError, match="ObjectiveWeights.com=-1.0 must be finite and >= 0"):
         ObjectiveWeights(com=-1.0)
 
 

@@ -42,6 +42,17 @@ def expect_type(value: object, kind: type | tuple[type, ...], what: str, remedy:
                             remedy=remedy)
 
 
+def check_field(config: object, name: str, ok: bool, rule: str,
+                remedy: str | None = None) -> None:
+    """PhysposeError naming a config dataclass's field and the rule it breaks unless `ok`;
+    the remedy defaults to the field's default value."""
+    if not ok:
+        value = getattr(config, name)
+        default = type(config).__dataclass_fields__[name].default
+        raise PhysposeError(f"{type(config).__name__}.{name}={value!r} must be {rule}",
+                            remedy=remedy or f"use e.g. {name}={default!r} (the default)")
+
+
 @contextmanager
 def about(path: str | Path, remedy: str | None = None, *,
           instead_of: str | Path | None = None) -> Iterator[None]:

@@ -193,7 +193,7 @@ def parse_weights(texts: list[str], weights: ObjectiveWeights) -> ObjectiveWeigh
                                        "e.g. --weight com=15")
         try:  # not a number, or one ObjectiveWeights rejects (negative, not finite)
             weights = dataclasses.replace(weights, **{term: float(value)})
-        except ValueError:
+        except (ValueError, PhysposeError):
             raise PhysposeError(f"--weight {text!r}: the weight must be a number >= 0",
                                 remedy=f"e.g. --weight {term}=1 (0 removes the term)") from None
     return weights

@@ -19,18 +19,13 @@ from physpose.dynamics.controller import ControllerGains
 from physpose.dynamics.ilqr import RefineConfig
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.dynamics.travel import CAMERA_SETTINGS
-from physpose.errors import PhysposeError, expect_type
+from physpose.errors import PhysposeError, check_field, expect_type
 
 # Hinges whose targets CMA-ES varies (optimize.searched_dofs).
 SEARCH_SETS = ("all", "legs_trunk", "legs")
 # The refinement's keep ratio while it was fixed (stops 36-37): checkpoints made then have no
 # keep_ratio in their key, so only this value may leave it out, whatever the default becomes.
 UNKEYED_KEEP_RATIO = 1.5
-
-
-def _default(name: str) -> object:
-    """The default of a DynamicsConfig field (for remedies)."""
-    return DynamicsConfig.__dataclass_fields__[name].default
 
 
 @dataclass(frozen=True)
@@ -156,9 +151,8 @@ class DynamicsConfig:
         for name in ("popsize", "iterations", "parallel_windows", "nthread", "candidates",
                      "searches", "retries", "seed"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-                raise PhysposeError(f"dynamics config {name}={value!r} must be a whole number",
-                                    remedy=f"use e.g. {name}={_default(name)}")
+            check_field(self, name, isinstance(value, (int, np.integer))
+                        and not isinstance(value, bool), "a whole number")
         positive = ("window", "knot_spacing", "reference_knot_spacing", "sigma0",
                     "max_root_distance", "max_penetration")
         for name in positive:
@@ -166,16 +160,10 @@ class DynamicsConfig:
                 raise PhysposeError(f"dynamics config {name}={getattr(self, name)} must be > 0",
                                     remedy="use a preset (fast or paper) or positive values")
         for name in ("window", "knot_spacing", "reference_knot_spacing", "sigma0"):
-            if not math.isfinite(getattr(self, name)):
-                raise PhysposeError(f"dynamics config {name}={getattr(self, name)} must be "
-                                    "finite", remedy="use a preset (fast or paper)")
+            check_field(self, name, math.isfinite(getattr(self, name)), "finite")
         for name in ("contact_height", "ground_snap"):
-            if not getattr(self, name) >= 0:
-                raise PhysposeError(f"dynamics config {name}={getattr(self, name)} must be >= 0",
-                                    remedy="use e.g. 0.03 (m)")
-        if self.popsize < 2:
-            raise PhysposeError(f"dynamics popsize {self.popsize} must be >= 2 (CMA-ES ranks "
-                                "its samples)", remedy="use e.g. popsize=24")
+            check_field(self, name, getattr(self, name) >= 0, ">= 0 (m)")
+        check_field(self, "popsize", self.popsize >= 2, "at least 2 (CMA-ES ranks its samples)")
         if not 0 <= self.overlap < self.window:
             raise PhysposeError(f"dynamics overlap {self.overlap} s must be in [0, window)",
                                 remedy="choose an overlap shorter than the window")

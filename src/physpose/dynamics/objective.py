@@ -51,6 +51,7 @@ import numpy as np
 
 from physpose.dynamics import quat
 from physpose.dynamics.rollout import FrameSamples
+from physpose.errors import check_field
 from physpose.fk import site_positions
 from physpose.joints import LANDMARK_NAMES
 from physpose.metrics import transform_points
@@ -84,8 +85,8 @@ class ObjectiveWeights:
     def __post_init__(self) -> None:
         for f in fields(self):
             value = getattr(self, f.name)
-            if not (np.isfinite(value) and value >= 0):
-                raise ValueError(f"objective weight {f.name}={value} must be finite and >= 0")
+            check_field(self, f.name, np.isfinite(value) and value >= 0,
+                        "finite and >= 0 (0 switches the term off)")
 
     def as_dict(self) -> dict[str, float]:
         return {name: float(getattr(self, name)) for name in TERMS}

@@ -11,20 +11,12 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from physpose.errors import PhysposeError, expect_type
+from physpose.errors import PhysposeError, check_field, expect_type
 from physpose.pinhole import DEFAULT_DIAGONAL_FOV_DEG
 
 DEPTH_SCALE_RANGE = (0.3, 2.0)  # the fit's bounds on the factor on MediaPipe's depth
 
 VARIANT_NAMES: tuple[str, ...] = ("S", "SO", "SO+G", "SO+T", "SO+GT")
-
-
-def _require(config: object, name: str, ok: bool, rule: str) -> None:
-    """PhysposeError naming the config's field unless `ok`."""
-    if not ok:
-        default = type(config).__dataclass_fields__[name].default
-        raise PhysposeError(f"{type(config).__name__}.{name}={getattr(config, name)} must be "
-                            f"{rule}", remedy=f"use e.g. {default} (the default)")
 
 
 @dataclass(frozen=True)
@@ -82,8 +74,9 @@ class PoseWeights:
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):
-            _require(self, f.name, math.isfinite(getattr(self, f.name))
-                     and getattr(self, f.name) >= 0, "finite and >= 0 (0 switches it off)")
+            value = getattr(self, f.name)
+            check_field(self, f.name, math.isfinite(value) and value >= 0,
+                        "finite and >= 0 (0 switches the term off)")
 
 
 @dataclass(frozen=True)
@@ -115,7 +108,7 @@ class PoseConfig:
         for name in ("sigma_2d", "sigma_3d", "depth_sigma_ratio", "robust_c", "sigma_velocity",
                      "sigma_acceleration", "sigma_angle_acceleration"):
             value = getattr(self, name)
-            _require(self, name, math.isfinite(value) and value > 0, "finite and > 0")
+            check_field(self, name, math.isfinite(value) and value > 0, "finite and > 0")
         low, high = DEPTH_SCALE_RANGE
         if not low <= self.depth_scale_prior_centre <= high:
             raise PhysposeError(
@@ -151,7 +144,7 @@ class GroundConfig:
     raised_supports: bool = True      # feet that stay raised (a box, a step) stand on its top
 
     def __post_init__(self) -> None:
-        _require(self, "rounds", self.rounds >= 1, "at least 1")
+        check_field(self, "rounds", self.rounds >= 1, "at least 1")
 
 
 @dataclass(frozen=True)
