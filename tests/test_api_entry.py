@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 
+import numpy as np
 import pytest
 from synthetic_result import make_reconstruction
 from test_mocap import bvh_rows, write_bvh
@@ -123,3 +124,24 @@ def test_an_analysis_rate_out_of_range_is_refused_when_configured():
     # (with --slow-motion it had been clamped into range without a word)
     with pytest.raises(PhysposeError, match="target frame rate -25 fps is outside 1-240"):
         ObserveConfig(target_fps=-25.0)
+
+
+@pytest.mark.parametrize("change, match", [
+    ("zero_root", "root orientation is not a unit quaternion"),
+    ("camera_K", "camera_K has shape \\(3, 4\\)"),
+    ("T_world2cam", "T_world2cam has shape \\(4, 4\\) or non-finite"),
+])
+def test_a_hand_built_kinematic_fit_is_checked(clip, change, match):
+    # (zero root quaternions had failed inside the ground forces' least squares; a wrong
+    # camera had run to a loss of inf)
+    body, fit, obs = clip
+    if change == "zero_root":
+        qpos = fit.qpos.copy()
+        qpos[2, 3:7] = 0.0
+        fit = dataclasses.replace(fit, qpos=qpos)
+    elif change == "camera_K":
+        fit = dataclasses.replace(fit, camera_K=np.zeros((3, 4)))
+    else:
+        fit = dataclasses.replace(fit, T_world2cam=np.full((4, 4), np.nan))
+    with pytest.raises(PhysposeError, match=match):
+        optimize_dynamics(body, fit, obs, PRESETS["fast"], checkpoints=False)

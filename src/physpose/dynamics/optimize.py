@@ -94,6 +94,17 @@ def _check_inputs(kin: KinematicFit, obs: Observations) -> None:
     if len(bad):
         raise PhysposeError("the kinematic estimate is not finite", path=obs.source,
                             frame=int(bad[0]), remedy="re-run the kinematic fit")
+    bad = np.flatnonzero(np.abs(np.linalg.norm(kin.qpos[:, 3:7], axis=1) - 1.0) > 1e-3)
+    if len(bad):
+        raise PhysposeError("the kinematic estimate's root orientation is not a unit "
+                            "quaternion (w, x, y, z)", path=obs.source, frame=int(bad[0]),
+                            remedy="normalise qpos[:, 3:7], or re-run the kinematic fit")
+    for name, shape in (("camera_K", (3, 3)), ("T_world2cam", (4, 4))):
+        value = np.asarray(getattr(kin, name))
+        if value.shape != shape or not np.isfinite(value).all():
+            raise PhysposeError(f"the kinematic fit's {name} has shape {value.shape} or "
+                                f"non-finite values, expected a finite {shape[0]}x{shape[1]} "
+                                "matrix", path=obs.source, remedy="re-run the kinematic fit")
 
 
 def _check_body(body: Body, kin: KinematicFit, tolerance: float = 0.005) -> None:
