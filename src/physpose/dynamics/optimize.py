@@ -76,7 +76,15 @@ class _Setup:
     start_qvel: np.ndarray    # (N+1, 54) velocities a window started from the estimate takes
 
 
-def _check_inputs(kin: KinematicFit, obs: Observations) -> None:
+def _check_inputs(body: Body, kin: KinematicFit, obs: Observations, config: DynamicsConfig,
+                  bone_tolerance: float = 0.005) -> None:
+    """PhysposeError, with a remedy, for inputs that do not belong together or are malformed."""
+    for value, kind, what, remedy in (
+            (body, Body, "body", "pass build_body(kinematic_fit.shape, scene)"),
+            (kin, KinematicFit, "kinematic_fit", "pass fit_kinematics(observations)"),
+            (obs, Observations, "observations", "pass the fit's observations"),
+            (config, DynamicsConfig, "config", "pass e.g. physpose.dynamics.PRESETS['fast']")):
+        expect_type(value, kind, f"optimize_dynamics' {what}", remedy)
     t = kin.num_frames
     if kin.qpos.shape != (t, NQ):
         raise PhysposeError(f"kinematic qpos has shape {kin.qpos.shape}, expected ({t}, {NQ})",
@@ -105,13 +113,10 @@ def _check_inputs(kin: KinematicFit, obs: Observations) -> None:
             raise PhysposeError(f"the kinematic fit's {name} has shape {value.shape} or "
                                 f"non-finite values, expected a finite {shape[0]}x{shape[1]} "
                                 "matrix", path=obs.source, remedy="re-run the kinematic fit")
-
-
-def _check_body(body: Body, kin: KinematicFit, tolerance: float = 0.005) -> None:
-    """The body must have the fit's bones: the estimate's joint angles only put the body's
-    landmarks where the fit's were with the same segment lengths (its mass may differ)."""
+    # The body must have the fit's bones: the estimate's joint angles only put the body's
+    # landmarks where the fit's were with the same segment lengths (its mass may differ).
     off = np.abs(body.shape.bones() - kin.shape.bones())
-    if off.max() > tolerance:
+    if off.max() > bone_tolerance:
         raise PhysposeError(f"the body's bones differ from the kinematic fit's by up to "
                             f"{100 * off.max():.1f} cm", remedy="build the body from the fit's "
                             "shape: build_body(kinematic_fit.shape, scene)")
@@ -543,7 +548,7 @@ def reference_motion(body: Body, kinematic_fit: KinematicFit, observations: Obse
     (``reference_knot_spacing``), moved on by a travelling camera's path where ``camera``
     says so. No physics: it tells what the physics stage's preparation alone does to the
     estimate (the benchmark's ``dynamics-reference`` and ``truth-reference``)."""
-    _check_inputs(kinematic_fit, observations)
+    _check_inputs(body, kinematic_fit, observations, config)
     setup = _setup(sim_model(body), kinematic_fit, observations, config)
     return setup.reference.qpos[setup.frame_steps]
 
@@ -557,14 +562,7 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
     checkpoint_dir: root of the run folders (default: the stage cache); checkpoints=False
     writes and reads none. progress: a tqdm bar per window on stderr.
     """
-    for value, kind, what, remedy in (
-            (body, Body, "body", "pass build_body(kinematic_fit.shape, scene)"),
-            (kinematic_fit, KinematicFit, "kinematic_fit", "pass fit_kinematics(observations)"),
-            (observations, Observations, "observations", "pass the fit's observations"),
-            (config, DynamicsConfig, "config", "pass e.g. physpose.dynamics.PRESETS['fast']")):
-        expect_type(value, kind, f"optimize_dynamics' {what}", remedy)
-    _check_inputs(kinematic_fit, observations)
-    _check_body(body, kinematic_fit)
+    _check_inputs(body, kinematic_fit, observations, config)
     timing: dict[str, float] = {}
     t0 = time.perf_counter()
     sim = sim_model(body)
