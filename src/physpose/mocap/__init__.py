@@ -7,7 +7,6 @@ the file extension.
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 from physpose.errors import PhysposeError
@@ -45,9 +44,6 @@ def load_mocap(path: str | Path, target_fps: float | None = 25.0,
     target_fps: rate of the returned clip (None keeps the file's own).
     """
     path = Path(path)
-    if target_fps is not None and not (math.isfinite(target_fps) and target_fps > 0):
-        raise PhysposeError(f"target_fps {target_fps} must be a positive rate", path=path,
-                            remedy="use e.g. 25, or None to keep the file's own rate")
     if not path.is_file():
         raise PhysposeError("motion-capture file not found", path=path)
     suffix = path.suffix.lower()

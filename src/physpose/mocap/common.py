@@ -7,6 +7,7 @@ file's rate); `finish_clip` turns it into a `MocapClip`: z up, the floor at z = 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -135,6 +136,10 @@ def rotation_to_z_up(up: np.ndarray) -> np.ndarray:
 
 def finish_clip(motion: SkeletonMotion, target_fps: float | None) -> MocapClip:
     """Z up, trunk joints, floor at z = 0 and a uniform rate (`target_fps`; None keeps the file's)."""
+    if target_fps is not None and not (math.isfinite(target_fps) and target_fps > 0):
+        raise PhysposeError(f"target_fps {target_fps} must be a positive rate",
+                            path=motion.source,
+                            remedy="use e.g. 25, or None to keep the file's own rate")
     missing = set(ANATOMICAL_POINTS) - motion.points.keys()
     if missing:
         raise PhysposeError(f"reader produced no {sorted(missing)}", path=motion.source)
@@ -159,7 +164,7 @@ def finish_clip(motion: SkeletonMotion, target_fps: float | None) -> MocapClip:
     joints = np.stack([trunk[n] if n in trunk else pts[n] for n in JOINT_NAMES], axis=1)
 
     source_fps = float(1.0 / np.median(dts))
-    fps = float(target_fps) if target_fps else source_fps
+    fps = float(target_fps) if target_fps is not None else source_fps
     new_t = np.arange(0.0, times[-1] + 1e-9, 1.0 / fps)
     joints, head_top = resample(times, joints, new_t), resample(times, pts["head_top"], new_t)
     head_rot = orthonormalize(resample(times, head_rot, new_t))
