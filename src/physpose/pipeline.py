@@ -160,13 +160,14 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
         kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
                              **({"log": stderr_log} if progress else {}))
         timings.lap("kinematics")
-        scene = _scene_for(kin, config, found)
+        scene, found_in_fit = _scene_for(kin, config)
+        found |= found_in_fit
         body = build_body(kin.shape, scene, config.body)
         timings.lap("body")
         phys = optimize_dynamics(body, kin, obs, config.dynamics, checkpoint_dir=windows,
                                  progress=progress)
         timings.lap("dynamics")
-        _screen_physics(phys, kin.fps, config.dynamics, found)
+        found |= _screen_physics(phys, kin.fps, config.dynamics)
         recon = kin.to_reconstruction(obs, body_mjcf=body.xml).replace(
             **phys.reconstruction_fields())
         recon = recon.replace(meta={**recon.meta, "slow_motion": config.slow_motion,
@@ -218,9 +219,9 @@ def _screen_observations(obs: Observations, slow_motion: float
                  "person_jumps": jumps, "hidden_feet": hidden_feet, "stride_period": stride}
 
 
-def _scene_for(kin: KinematicFit, config: PipelineConfig, found: dict) -> SceneConfig:
+def _scene_for(kin: KinematicFit, config: PipelineConfig) -> tuple[SceneConfig, dict]:
     """The configured scene plus the supports and seats the estimate asks for (with
-    config.auto_support); what was found goes into `found`, problems are logged."""
+    config.auto_support), and what was found (meta["diagnostics"]); problems are logged."""
     camera_height = metrics.camera_height(kin.T_world2cam)
     _warn(diagnostics.low_camera_message(camera_height))
     raised = diagnostics.raised_runs(kin.joints, kin.fps)
@@ -230,21 +231,21 @@ def _scene_for(kin: KinematicFit, config: PipelineConfig, found: dict) -> SceneC
     seated = supports.seated_runs(kin.joints, kin.fps)
     seats = supports.seat_boxes(kin.joints, seated) if config.auto_support else ()
     _warn(diagnostics.seated_message(seated, seats, kin.fps))
-    found.update(camera_height=camera_height, raised=[list(r) for r in raised],
-                 supports=[[*b.center, *b.size] for b in boxes],
-                 seated=[list(r) for r in seated], seats=[b.spec() for b in seats])
+    found = {"camera_height": camera_height, "raised": [list(r) for r in raised],
+             "supports": [[*b.center, *b.size] for b in boxes],
+             "seated": [list(r) for r in seated], "seats": [b.spec() for b in seats]}
     if not (boxes or seats):
-        return config.scene
+        return config.scene, found
     return dataclasses.replace(config.scene,
-                               obstacles=config.scene.obstacles + boxes + seats)
+                               obstacles=config.scene.obstacles + boxes + seats), found
 
 
-def _screen_physics(phys: PhysicsResult, fps: float, config: DynamicsConfig, found: dict) -> None:
-    """Windows without a valid sample and forces the simulation did not record, into
-    `found` and logged."""
+def _screen_physics(phys: PhysicsResult, fps: float, config: DynamicsConfig) -> dict:
+    """Windows without a valid sample and forces the simulation did not record
+    (meta["diagnostics"]), logged."""
     invalid = diagnostics.invalid_window_runs(phys.windows, sequential=not config.independent)
     _warn(diagnostics.invalid_message(invalid, fps))
     unrecorded = diagnostics.unrecorded_force_runs(phys.grf)
     _warn(diagnostics.unrecorded_forces_message(unrecorded, fps))
-    found.update(invalid_windows=[list(r) for r in invalid],
-                 unrecorded_forces=[list(r) for r in unrecorded])
+    return {"invalid_windows": [list(r) for r in invalid],
+            "unrecorded_forces": [list(r) for r in unrecorded]}
