@@ -286,6 +286,22 @@ def test_independent_windows_are_blended(clip):
     assert wins[-1].last == 40 and wins[-1].last - wins[-1].first == 10
 
 
+@pytest.mark.parametrize("frames, fps, overlap", [(100, 30.0, 0.6), (110, 60.0, 0.2), (41, 25.0, 0.16)])
+def test_independent_windows_fade_linearly_into_what_came_before(frames, fps, overlap):
+    # Each window fades in linearly over its overlap with all the windows before it, also
+    # where the anchored last window reaches over two of them, and the weights sum to 1.
+    wins = plan_windows(frames, fps, 0.005, 1.0 if overlap > 0.16 else 0.4, overlap,
+                        anchor_last=True)
+    weights = blend_weights(wins, frames)
+    np.testing.assert_allclose(weights.sum(axis=0), 1.0)
+    assert (weights >= 0).all()
+    last = wins[-1]
+    fade = weights[-1, last.first:max(w.last for w in wins[:-1]) + 1]
+    assert len(fade) > 1 and (fade < 1).all()
+    np.testing.assert_allclose(np.diff(fade), fade[0], atol=1e-12)
+    assert (weights[0, :wins[1].first] == 1).all()
+
+
 @pytest.mark.parametrize("fps", [24.0, 25.0, 29.97, 30.0, 60.0])
 def test_every_sequential_window_has_coefficients_of_its_own(fps):
     # A window that begins and ends between two knots would have no spline coefficient that

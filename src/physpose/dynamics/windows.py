@@ -155,18 +155,21 @@ def ranked_fitness(scores: Scores, num_frames: int) -> np.ndarray:
 
 
 def blend_weights(windows: list[Window], num_frames: int) -> np.ndarray:
-    """(W, T) weights joining independently optimised windows: linear cross-fades where
-    windows overlap, each frame's weights summing to 1."""
+    """(W, T) weights joining independently optimised windows, each frame's summing to 1.
+
+    The windows are joined in order: each fades in linearly over its overlap with the frames
+    the windows before it cover, and the join so far fades out by the same ramp. Where two
+    windows overlap this is the plain linear cross-fade; where a window (an anchored last
+    one) reaches over two or more, it fades into their join instead of into one of them.
+    """
     w = np.zeros((len(windows), num_frames))
+    covered = -1
     for i, win in enumerate(windows):
         ramp = np.ones(win.last - win.first + 1)
-        if i > 0:
-            n = windows[i - 1].last - win.first + 1
-            if n > 0:
-                ramp[:n] = np.minimum(ramp[:n], (np.arange(n) + 1.0) / (n + 1.0))
-        if i + 1 < len(windows):
-            n = win.last - windows[i + 1].first + 1
-            if n > 0:
-                ramp[-n:] = np.minimum(ramp[-n:], (n - np.arange(n)) / (n + 1.0))
+        n = min(covered, win.last) - win.first + 1
+        if n > 0:
+            ramp[:n] = (np.arange(n) + 1.0) / (n + 1.0)
+            w[:i, win.first:win.first + n] *= 1.0 - ramp[:n]
         w[i, win.first:win.last + 1] = ramp
-    return w / w.sum(axis=0, keepdims=True)
+        covered = max(covered, win.last)
+    return w
