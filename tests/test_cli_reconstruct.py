@@ -55,6 +55,8 @@ def _args(*argv: str):
     (["--slow-motion", "0"], "slow motion 0x is outside"),
     (["--slow-motion", "-4"], "slow motion -4x is outside"),
     (["--person", "5000,10"], "--person 5000,10 is outside the"),
+    (["--person", "-10,20"], "--person -10,20 is outside the"),
+    (["--person", "-.5,-3"], "--person -0.5,-3 is outside the"),
     (["--camera", "{missing}.json"], "camera file not found"),
     (["--camera", "{bad_json}"], "cannot read camera intrinsics"),
     (["--camera", "{good_json}", "--camera-name", "cam01"], "applies to a Qualisys"),

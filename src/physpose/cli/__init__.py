@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import re
 import sys
 
 from physpose import __version__
@@ -36,8 +37,26 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+# Options whose value may start with a minus sign. argparse takes "--person -10,20" for an
+# option followed by another option; main() joins such a pair as "--person=-10,20", so the
+# value reaches its own check (which says what is wrong with it).
+SIGNED_VALUE_OPTIONS = ("--person",)
+_SIGNED_VALUE = re.compile(r"^-[\d.]")
+
+
+def join_signed_values(argv: list[str]) -> list[str]:
+    joined: list[str] = []
+    for arg in argv:
+        if joined and joined[-1] in SIGNED_VALUE_OPTIONS and _SIGNED_VALUE.match(arg):
+            joined[-1] = f"{joined[-1]}={arg}"
+        else:
+            joined.append(arg)
+    return joined
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else argv
+    args = build_parser().parse_args(join_signed_values(argv))
     try:
         return int(args.func(args) or 0)
     except PhysposeError as err:
