@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -232,3 +234,18 @@ def test_evaluate_refuses_what_it_would_score_wrongly(kwargs, match):
     args = dict(est=np.zeros((5, 21, 3)), fps=25.0) | kwargs
     with pytest.raises(PhysposeError, match=match):
         m.evaluate(args.pop("est"), **args)
+
+
+@pytest.mark.parametrize("frames", [1, 2])
+def test_a_motion_too_short_for_a_metric_scores_nan_without_warnings(frames):
+    # Velocities need two frames, accelerations three; a metric a clip cannot have is NaN
+    # (which the benchmark's means skip), and the others are still scored.
+    gt = motion(np.zeros((frames, 3)))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = m.evaluate(gt + 0.01, gt, fps=FPS)
+    assert np.isnan(res["jitter_mps2"])
+    assert np.isnan(res["velocity_error_mps"]) == (frames == 1)
+    assert np.isnan(res["foot_skate_pct"]) == (frames == 1)
+    assert res["mpjpe_mm"] == pytest.approx(0.0, abs=1e-9)
+    assert res["mpjpe_g_mm"] == pytest.approx(0.0, abs=1e-9)

@@ -133,22 +133,29 @@ def mpjpe_2d(est_px: np.ndarray, target_px: np.ndarray,
     return float((w * err).sum() / w.sum())
 
 
+def _mean(values: np.ndarray) -> float:
+    """The mean, NaN (without numpy's warning) where a motion is too short to have values."""
+    return float(values.mean()) if values.size else float("nan")
+
+
 def velocity_error(est: np.ndarray, gt: np.ndarray, fps: float, root: int = 0) -> float:
-    """Mean |speed_gt - speed_est| (m/s) over frames and joints (paper eq. of e_v).
+    """Mean |speed_gt - speed_est| (m/s) over frames and joints (paper eq. of e_v); NaN for a
+    single frame.
 
     Speeds are magnitudes of finite-difference velocities of the first-frame-aligned joints.
     """
     _check(est, gt)
     est = align_first_frame(est, gt, root)
     speed = lambda x: np.linalg.norm(np.diff(x, axis=0), axis=-1) * fps
-    return float(np.abs(speed(gt) - speed(est)).mean())
+    return _mean(np.abs(speed(gt) - speed(est)))
 
 
 def jitter(joints: np.ndarray, fps: float) -> float:
-    """Mean joint acceleration magnitude (m/s^2), second finite differences."""
+    """Mean joint acceleration magnitude (m/s^2), second finite differences; NaN for fewer
+    than three frames."""
     _check(joints)
     acc = (joints[2:] - 2 * joints[1:-1] + joints[:-2]) * fps ** 2
-    return float(np.linalg.norm(acc, axis=-1).mean())
+    return _mean(np.linalg.norm(acc, axis=-1))
 
 
 def foot_points(joints: np.ndarray, cfg: ContactConfig = KINEMATIC_CONTACT,
@@ -187,7 +194,8 @@ def foot_contacts(joints: np.ndarray, cfg: ContactConfig = KINEMATIC_CONTACT,
 
 def foot_skate(joints: np.ndarray, cfg: ContactConfig = KINEMATIC_CONTACT,
                joint_names=JOINT_NAMES) -> float:
-    """% of frame pairs in which a foot in contact (both frames) slides > SKATE_DISTANCE.
+    """% of frame pairs in which a foot in contact (both frames) slides > SKATE_DISTANCE; NaN
+    for a single frame (no pair).
 
     A foot slides when both its heel and its toe move further than that horizontally (a foot
     rolling over its heel or toe keeps one of them planted).
@@ -200,7 +208,7 @@ def foot_skate(joints: np.ndarray, cfg: ContactConfig = KINEMATIC_CONTACT,
                                axis=-1) for p in ("heel", "toe")]
         moved.append(np.minimum(*step) > SKATE_DISTANCE)
     skating = (both & np.stack(moved, axis=1)).any(axis=1)
-    return float(100.0 * skating.mean()) if len(skating) else 0.0
+    return 100.0 * _mean(skating)
 
 
 def foot_float(joints: np.ndarray, cfg: ContactConfig = KINEMATIC_CONTACT,
