@@ -16,8 +16,9 @@ from physpose.dynamics import PRESETS
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.errors import PhysposeError
 from physpose.diagnostics import LOW_CAMERA, trimmed_message
-from physpose.pipeline import (CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig, reconstruct,
-                               trim_unseen_ends, unsure_times)
+from physpose.pipeline import (CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig,
+                               _screen_observations, reconstruct, trim_unseen_ends,
+                               unsure_times)
 from physpose.reconstruction import Reconstruction
 from physpose.shape import BodyShape
 
@@ -108,6 +109,25 @@ def test_frames_before_and_after_the_person_is_in_view_are_left_out():
     assert trim_unseen_ends(few)[1] is None
 
 
+def test_a_person_jump_is_told_in_seconds_into_the_video(caplog):
+    # The warning's remedy is --start/--end, which take seconds into the video: after the
+    # unseen first frames are left out, the output's frame 11 is the video's 15th analysed.
+    body = build_body(BodyShape.from_height(1.75))
+    _, obs, _ = simulated_clip(body, "stand", seconds=1.2)
+    unseen = np.arange(obs.num_frames) < 4
+    keypoints = obs.keypoints2d.copy()
+    keypoints[15:, :, 0] += 400.0  # another person, far to the side
+    jumped = obs.replace(keypoints2d=np.where(unseen[:, None, None], 0.0, keypoints),
+                         detected=obs.detected & ~unseen,
+                         interpolated=obs.interpolated & ~unseen,
+                         timestamps=obs.timestamps + 2.0)  # analysed from --start 2
+    with caplog.at_level("WARNING", logger="physpose.pipeline"):
+        kept, found = _screen_observations(jumped, 1.0)
+    assert found["person_jumps"] == [11] and kept.num_frames == obs.num_frames - 4
+    assert found["person_jump_times"] == [round(float(obs.timestamps[15]) + 2.0, 4)]
+    assert f"11 ({obs.timestamps[15] + 2.0:.2f} s into the video)" in caplog.text
+
+
 @pytest.mark.slow
 def test_reconstruct_writes_the_contract(tmp_path):
     body = build_body(BodyShape.from_height(1.75))
@@ -128,7 +148,7 @@ def test_reconstruct_writes_the_contract(tmp_path):
     assert found.pop("camera_height") > LOW_CAMERA  # the floor from a standing body
     assert found == {"trimmed": None, "observed_frames": t,
                      "camera_motion": None, "unsure_detections": [], "person_jumps": [],
-                     "hidden_feet": 0.0, "raised": [], "supports": [], "seated": [],
+                     "person_jump_times": [], "hidden_feet": 0.0, "raised": [], "supports": [], "seated": [],
                      "seats": [], "invalid_windows": [], "unrecorded_forces": [],
                      "stride_period": None}
     # The simulated forces are in the contract's file: the floor carries the body's weight.

@@ -217,11 +217,16 @@ def _span(a: int, b: int, fps: float) -> str:
     return f"{a}-{b} ({a / fps:.2f}-{(b + 1) / fps:.2f} s)"
 
 
-def jumps_message(frames: list[int], fps: float) -> str | None:
-    """A warning on `person_jumps`, or None."""
+def jumps_message(frames: list[int], fps: float, times: list[float] | None = None
+                  ) -> str | None:
+    """A warning on `person_jumps`, or None; `times`, where given, are the frames' seconds
+    into the video (what --start/--end take), else they are counted from the first frame."""
     if not frames:
         return None
-    where = ", ".join(_at(f, fps) for f in frames)
+    if times is not None and len(times) == len(frames):
+        where = ", ".join(f"{f} ({t:.2f} s into the video)" for f, t in zip(frames, times))
+    else:
+        where = ", ".join(_at(f, fps) for f in frames)
     return (f"input: the detected person jumps further than a body moves at frame"
             f"{'s' * (len(frames) > 1)} {where}: the detector has probably switched to "
             "another person (or the video cuts there). physpose follows one person, so the "
@@ -373,7 +378,8 @@ def warning_lines(found: dict, fps: float, slow_motion: float = 1.0) -> list[str
              trimmed_message(found.get("trimmed"), found.get("observed_frames", 0), fps),
              camera_message(found.get("camera_motion")),
              unsure_message(found.get("unsure_detections", [])),
-             jumps_message(found.get("person_jumps", []), fps),
+             jumps_message(found.get("person_jumps", []), fps,
+                           found.get("person_jump_times")),
              hidden_feet_message(found.get("hidden_feet", 0.0)),
              low_camera_message(found.get("camera_height")),
              raised_message([tuple(r) for r in found.get("raised", [])], fps,

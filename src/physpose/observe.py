@@ -298,8 +298,9 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
     if jumps and cfg.person is None and not zoomed:
         # The tracker lost its person and took another: look again, with every frame masked
         # to where the subject (the longest track and those continuing it) can be.
-        _log.warning("%s: the detected person jumps at frames %s; looking again for one "
-                     "person only", video, ", ".join(map(str, jumps)))
+        _log.warning("%s: the detected person jumps at %s s into the video; looking again "
+                     "for one person only", video,
+                     ", ".join(f"{obs.timestamps[f]:.2f}" for f in jumps))
         regions = subject_regions(obs.keypoints2d, obs.detected, obs.fps, info.image_size)
         again = _detect_all(info, plan, cfg, progress, regions=regions, check=False)
         left = person_jumps(again.keypoints2d, again.detected, again.fps)

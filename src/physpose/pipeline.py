@@ -118,12 +118,16 @@ def trim_unseen_ends(obs: Observations) -> tuple[Observations, list[int] | None]
     return obs.frames(first, last + 1), [first, last]
 
 
+def footage_times(obs: Observations, frames, slow_motion: float = 1.0) -> list[float]:
+    """Seconds into the footage (what --start/--end take) of the given frames; obs on the real
+    clock of footage `slow_motion` times slower."""
+    return [round(float(t) * slow_motion, 4) for t in np.asarray(obs.timestamps)[frames]]
+
+
 def unsure_times(obs: Observations, slow_motion: float = 1.0) -> list[float]:
     """Seconds into the footage of the detections observe left out as torn
-    (`Observations.unsure`); obs on the real clock of footage `slow_motion` times slower."""
-    if obs.unsure is None:
-        return []
-    return [round(float(t) * slow_motion, 4) for t in np.asarray(obs.timestamps)[obs.unsure]]
+    (`Observations.unsure`)."""
+    return [] if obs.unsure is None else footage_times(obs, obs.unsure, slow_motion)
 
 
 def reconstruct(video_or_observations: str | Path | Observations, out_dir: str | Path,
@@ -208,7 +212,8 @@ def _screen_observations(obs: Observations, slow_motion: float
     _warn(diagnostics.trimmed_message(trimmed, observed_frames, obs.fps))
     _warn(diagnostics.camera_message(obs.camera_motion))
     jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
-    _warn(diagnostics.jumps_message(jumps, obs.fps))
+    jump_times = footage_times(obs, jumps, slow_motion)
+    _warn(diagnostics.jumps_message(jumps, obs.fps, jump_times))
     keypoints = obs.frame_keypoints()
     hidden_feet = diagnostics.hidden_feet_share(keypoints, obs.valid, obs.image_size)
     _warn(diagnostics.hidden_feet_message(hidden_feet))
@@ -216,7 +221,8 @@ def _screen_observations(obs: Observations, slow_motion: float
     _warn(diagnostics.slow_stride_message(stride, slow_motion))
     return obs, {"trimmed": trimmed, "observed_frames": observed_frames,
                  "camera_motion": obs.camera_motion, "unsure_detections": unsure,
-                 "person_jumps": jumps, "hidden_feet": hidden_feet, "stride_period": stride}
+                 "person_jumps": jumps, "person_jump_times": jump_times,
+                 "hidden_feet": hidden_feet, "stride_period": stride}
 
 
 def _scene_for(kin: KinematicFit, config: PipelineConfig) -> tuple[SceneConfig, dict]:
