@@ -44,8 +44,8 @@ again by a pass running backwards from just after it (`_recover_head`).
 
 Frames without a detection are flagged; gaps of at most `max_gap_frames` between two detected
 frames are filled by linear interpolation (positions, confidences, world landmarks and masks)
-and flagged `interpolated`. Results are cached
-(`physpose.cache`) by the video's bytes, the config and OBSERVE_VERSION.
+and flagged `interpolated`. Results are cached (`physpose.cache`) by the video's bytes, the
+config and OBSERVE_VERSION, with the warnings the run gave, which a cache hit gives again.
 """
 
 from __future__ import annotations
@@ -278,7 +278,42 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
     key = stage_key("observe", version=OBSERVE_VERSION, files=[video],
                     config=dataclasses.replace(cfg, use_cache=True))
     if cfg.use_cache and (hit := cache.get(key)) is not None:
+        for note in hit.pop(NOTES_KEY, ()):  # what the run that filled the cache warned about
+            _log.warning("%s", str(note).replace(_Notes.VIDEO, str(video)))
         return _from_arrays(hit, source=str(video))
+    notes = _Notes(video)
+    _log.addHandler(notes)
+    try:
+        obs = _observe_uncached(video, info, plan, cfg, progress)
+    finally:
+        _log.removeHandler(notes)
+    if cfg.use_cache:
+        cache.put(key, {**_to_arrays(obs), NOTES_KEY: np.array(notes.messages, dtype=str)})
+    return obs
+
+
+NOTES_KEY = "observe_notes"  # the warnings of the run, kept with its cached result
+
+
+class _Notes(logging.Handler):
+    """Collects the warnings observe logs, so that a result served from the cache can give
+    them again (a variable frame rate, a person followed in a crop or found backwards...)."""
+
+    VIDEO = "<video>"  # stands for the video's path, which a cache hit may not share
+
+    def __init__(self, video: Path) -> None:
+        super().__init__(logging.WARNING)
+        self.video = str(video)
+        self.messages: list[str] = []
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage().replace(self.video, self.VIDEO))
+
+
+def _observe_uncached(video: Path, info: videolib.VideoInfo, plan: videolib.FramePlan,
+                      cfg: ObserveConfig, progress: bool) -> Observations:
+    """observe() past its cache: detect, look again where needed, leave out torn detections,
+    map a turning camera's detections into the middle frame's view."""
     obs = _detect_all(info, plan, cfg, progress, check=False, timing_check=True)
     zoomed, seed, masked_to = False, None, None
     if cfg.person is None and obs.detected.sum() < cfg.min_detection_fraction * obs.num_frames:
@@ -319,8 +354,6 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
             _log.warning("%s: the camera turns (up to %.1f degrees from the middle frame's "
                          "view); the detections are mapped into that view", video,
                          motion.turned_deg)
-    if cfg.use_cache:
-        cache.put(key, _to_arrays(obs))
     return obs
 
 
