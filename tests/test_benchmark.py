@@ -10,7 +10,7 @@ import pytest
 from physpose.benchmark import VARIANTS, get_variant, register_variant, write_results
 from physpose.benchmark.baseline import level_ground_frame, solve_root_translation
 from physpose.benchmark.material import (Clip, Material, MaterialConfig, _observe_config,
-                                         crop_mocap, load_clips, mocap_clip)
+                                         crop_mocap, load_clips, mocap_clip, uniform_fps)
 from physpose.benchmark.oracle import FOOT_LANDMARKS, SOLE_JOINTS, STANCE_HEIGHT, truth_on_body
 from physpose.benchmark.report import aggregate, render_markdown
 from physpose.benchmark.runner import BenchmarkConfig, results_document, run_clips, run_variant
@@ -301,6 +301,12 @@ def test_registry():
     with pytest.raises(ValueError, match="already registered"):
         register_variant("baseline", lambda obs, ctx: None)
     assert register_variant("baseline", VARIANTS["baseline"]) is VARIANTS["baseline"]
+
+
+def test_uniform_fps():
+    assert uniform_fps(60.0, 25.0) == 30.0
+    assert uniform_fps(23.976, 25.0) == 23.976
+    assert uniform_fps(100.0, 25.0) == 25.0
 
 
 def test_cli_errors(tmp_path, capsys):

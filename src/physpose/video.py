@@ -1,12 +1,8 @@
 """Video decoding: probe a file, plan which frames to read at a target rate, and read them.
 
-Frames are resampled by reading every `step`-th source frame (no blending), the step giving
-the rate nearest the one asked for (`frame_step`): a 30 fps video is read at 30 fps for the
-default 25, a 60 fps one at 30, a 50 fps one at 25. Every later stage takes the frames as
-evenly spaced in time, so the plan never mixes steps (picking the source frame nearest each
-k / 25 s of a 30 fps video would step 1, 1, 1, 1, 2 frames, and a fifth of the frame-to-frame
-motions would be read as 1.67 times too fast). The rate never exceeds the source rate: asking
-for more frames per second than the video has gives the source rate (`FramePlan.note` says so).
+Frames are resampled by picking, for each target timestamp `start + k / fps`, the source frame
+nearest to it (no blending). The target rate never exceeds the source rate: asking for more
+frames per second than the video has gives the source rate (and `FramePlan.note` says so).
 Videos are assumed to have a constant frame rate; frame i is at time i / source_fps (the observe
 stage warns where the container's own times say otherwise: `timing_drift`).
 """
@@ -58,7 +54,7 @@ class VideoInfo:
 class FramePlan:
     """Which source frames to read: indices (T,) into the video and their times (T,) in s."""
 
-    fps: float                 # rate of the plan, Hz: the source rate over a whole step
+    fps: float                 # rate of the plan, Hz (the target, or the source if lower)
     indices: np.ndarray        # (T,) int, strictly increasing source frame indices
     timestamps: np.ndarray     # (T,) s, indices / source fps
     note: str = ""             # set when the requested rate could not be honoured
@@ -112,9 +108,8 @@ def probe(path: str | Path) -> VideoInfo:
                 count += 1
     finally:
         cap.release()
-    if not (math.isfinite(fps) and MIN_TARGET_FPS <= fps <= MAX_SOURCE_FPS):
-        raise PhysposeError(f"the container reports a frame rate of {fps:g} fps, outside "
-                            f"the {MIN_TARGET_FPS:g}-{MAX_SOURCE_FPS:g} fps physpose reads",
+    if not (math.isfinite(fps) and 0 < fps <= MAX_SOURCE_FPS):
+        raise PhysposeError(f"the container reports an implausible frame rate ({fps:g} fps)",
                             path=path, remedy=_REENCODE)
     height, width = frame.shape[:2]
     return VideoInfo(path=path, fps=fps, frame_count=count, width=width, height=height)
@@ -128,16 +123,9 @@ def check_target_fps(target_fps: float) -> None:
                             remedy="pass e.g. --fps 25 (the paper's rate)")
 
 
-def frame_step(source_fps: float, target_fps: float) -> int:
-    """The fixed step (source frames) whose rate, source_fps / step, is nearest `target_fps`
-    (never above the source rate)."""
-    return max(1, round(source_fps / target_fps))
-
-
 def plan_frames(info: VideoInfo, target_fps: float = 25.0, start: float | None = None,
                 end: float | None = None) -> FramePlan:
-    """Every `frame_step`-th source frame from `start` (s) to before `end`: the evenly spaced
-    frames at the rate nearest `target_fps`."""
+    """Pick the source frame nearest each target timestamp start + k / fps, start <= t < end."""
     check_target_fps(target_fps)
     duration = info.duration
     t0 = 0.0 if start is None else float(start)
@@ -155,14 +143,16 @@ def plan_frames(info: VideoInfo, target_fps: float = 25.0, start: float | None =
         raise PhysposeError(f"end {t1:g} s is past the end of the video ({duration:.3f} s)",
                             path=info.path, remedy="pick an end time inside the video or omit it")
     note = ""
-    if target_fps > info.fps:
+    fps = float(target_fps)
+    if fps > info.fps:
         note = (f"requested {target_fps:g} fps but the video has only {info.fps:g} fps; "
                 f"using {info.fps:g} fps (physpose never invents frames)")
-    step = frame_step(info.fps, target_fps)
-    fps = info.fps / step
-    count = max(1, math.ceil((t1 - t0) * fps - 1e-9))  # the times t0 + k / fps before t1
-    indices = int(math.floor(t0 * info.fps + 0.5)) + step * np.arange(count, dtype=np.int64)
-    indices = indices[indices < info.frame_count]
+        fps = info.fps
+    n = max(1, math.ceil((t1 - t0) * fps - 1e-9))
+    targets = t0 + np.arange(n) / fps
+    indices = np.floor(targets * info.fps + 0.5).astype(np.int64)
+    indices = np.clip(indices, 0, info.frame_count - 1)
+    indices = np.unique(indices)  # only the clip at the end can produce repeats
     return FramePlan(fps=fps, indices=indices, timestamps=indices / info.fps, note=note)
 
 

@@ -102,6 +102,11 @@ class Material:
     path: Path
 
 
+def uniform_fps(native: float, target: float) -> float:
+    """The rate nearest `target` that samples a `native`-rate source at a fixed frame step."""
+    return native / max(1, round(native / target))
+
+
 def load_clips(material: Material, cfg: MaterialConfig) -> list[Clip]:
     """The clips of one piece of material (one per view for multi-view folders)."""
     loaders = {"mocap": _mocap_clips, "multiview": _multiview_clips, "video": _video_clips}
@@ -158,7 +163,7 @@ def _observe_config(video: Path, cfg: MaterialConfig) -> ObserveConfig:
         raise PhysposeError(f"the video is {info.duration:.1f} s long; the benchmark's start "
                             f"{cfg.start_seconds:g} s is past its end", path=video,
                             remedy="pass a smaller --start, or leave this video out")
-    return ObserveConfig(target_fps=cfg.fps,
+    return ObserveConfig(target_fps=uniform_fps(info.fps, cfg.fps),
                          start=cfg.start_seconds or None, end=_clip_end(info.duration, cfg))
 
 

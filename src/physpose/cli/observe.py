@@ -108,9 +108,8 @@ def add_video_options(p: argparse.ArgumentParser) -> None:
     """The options that say how a video is observed (observe and fit; reconstruct has its own
     help for them, in real time under --slow-motion)."""
     p.add_argument("--fps", type=float, default=None, metavar="F",
-                   help=f"analysis frame rate, Hz (default {ObserveConfig.target_fps:g}): "
-                        "the video is read at the fixed frame step whose rate is nearest, "
-                        "e.g. every frame of a 30 fps video, every second of a 60 fps one")
+                   help=f"analysis frame rate, Hz (default {ObserveConfig.target_fps:g}; "
+                        "never above the video's own)")
     p.add_argument("--start", type=float, default=None, metavar="S", help="start time, s")
     p.add_argument("--end", type=float, default=None, metavar="E", help="end time, s")
     p.add_argument("--person", type=image_point, default=None, metavar="X,Y", help=PERSON_HELP)

@@ -101,9 +101,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--height", type=float, metavar="M", help="the person's standing height, m")
     g.add_argument("--mass", type=float, metavar="KG", help="the person's mass, kg")
     g.add_argument("--fps", type=float, help="analysis frame rate, Hz (default 25; in real "
-                                             "time with --slow-motion): the video is read at "
-                                             "the fixed frame step whose rate is nearest, "
-                                             "e.g. 30 for a 30 or 60 fps video")
+                                             "time with --slow-motion)")
     g.add_argument("--slow-motion", type=float, metavar="X",
                    help="the footage plays X times slower than real time, e.g. 4 for 120 fps "
                         "footage played at 30 fps (below 1: sped up). The body is then "
