@@ -211,23 +211,23 @@ def test_cache_hit_for_same_settings_miss_when_they_change(pose2sim_demo, tmp_pa
 
     monkeypatch.setattr(PoseDetector, "detect", counting)
     video = pose2sim_demo / "videos" / "cam02.mp4"
-    cfg = ObserveConfig(end=0.2)  # 6 frames: every second one of the 60 fps video
+    cfg = ObserveConfig(end=0.2)  # 5 frames
     first = observe(video, cfg, progress=False)
-    assert len(calls) == 6
+    assert len(calls) == 5
     again = observe(video, cfg, progress=False)
-    assert len(calls) == 6  # hit: MediaPipe did not run
+    assert len(calls) == 5  # hit: MediaPipe did not run
     np.testing.assert_array_equal(again.keypoints2d, first.keypoints2d)
     np.testing.assert_array_equal(again.masks, first.masks)
     assert again.image_size == first.image_size and again.fps == first.fps
     observe(video, ObserveConfig(end=0.2, mask_long_side=64), progress=False)
-    assert len(calls) == 12  # miss: a setting changed
+    assert len(calls) == 10  # miss: a setting changed
     observe(video, ObserveConfig(end=0.2, use_cache=False), progress=False)
-    assert len(calls) == 18  # use_cache=False always recomputes
+    assert len(calls) == 15  # use_cache=False always recomputes
     assert len(list((tmp_path / "cache" / "observe").glob("*.npz"))) == 2
     copy = tmp_path / "renamed.mp4"
     copy.write_bytes(video.read_bytes())
     moved = observe(copy, cfg, progress=False)
-    assert len(calls) == 18 and moved.source == str(copy)  # keyed by content, not by name
+    assert len(calls) == 15 and moved.source == str(copy)  # keyed by content, not by name
 
 
 def test_a_cached_result_gives_the_warnings_of_the_run_that_made_it(pose2sim_demo, tmp_path,

@@ -186,7 +186,10 @@ def test_truncated_avi_fails_while_reading_and_says_where(tmp_path):
     assert "cut.avi, frame" in str(err.value)
 
 
-def test_absurd_source_rate(tmp_path):
-    path = make_video(tmp_path / "fast.mp4", 5, fps=5000)
-    with pytest.raises(PhysposeError, match="implausible frame rate"):
+@pytest.mark.parametrize("fps", [5000, 0.5])
+def test_absurd_source_rate_is_refused_before_any_frame_is_read(tmp_path, fps):
+    # A slide show at 0.5 fps had been read and detected, then refused by the observations'
+    # own rate check with a remedy for keypoints files.
+    path = make_video(tmp_path / "odd.mp4", 5, fps=fps)
+    with pytest.raises(PhysposeError, match=f"frame rate of {fps:g} fps, outside the 1-1000"):
         probe(path)

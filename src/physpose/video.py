@@ -108,8 +108,9 @@ def probe(path: str | Path) -> VideoInfo:
                 count += 1
     finally:
         cap.release()
-    if not (math.isfinite(fps) and 0 < fps <= MAX_SOURCE_FPS):
-        raise PhysposeError(f"the container reports an implausible frame rate ({fps:g} fps)",
+    if not (math.isfinite(fps) and MIN_TARGET_FPS <= fps <= MAX_SOURCE_FPS):
+        raise PhysposeError(f"the container reports a frame rate of {fps:g} fps, outside "
+                            f"the {MIN_TARGET_FPS:g}-{MAX_SOURCE_FPS:g} fps physpose reads",
                             path=path, remedy=_REENCODE)
     height, width = frame.shape[:2]
     return VideoInfo(path=path, fps=fps, frame_count=count, width=width, height=height)
