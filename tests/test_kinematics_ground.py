@@ -24,10 +24,11 @@ def _posed_points(shape: BodyShape, qpos: np.ndarray, R_world2cam: np.ndarray,
     return surface, cam, centre_of_mass(shape, surface, cam)
 
 
-@pytest.mark.parametrize("tilt_deg, roll_deg", [(25.0, 0.0), (10.0, 8.0), (40.0, -5.0)])
+@pytest.mark.parametrize("tilt_deg, roll_deg", [(25.0, 0.0), (10.0, 8.0), (40.0, -5.0),
+                                                (10.0, 180.0), (25.0, 150.0), (10.0, -120.0)])
 def test_tilted_floor_is_recovered(tilt_deg, roll_deg):
-    """A camera pitched down by tilt_deg (and rolled) sees a person walk on the floor: the
-    estimated plane is the floor in camera axes."""
+    """A camera pitched down by tilt_deg (and rolled; a half turn: held upside down) sees a
+    person walk on the floor: the estimated plane is the floor in camera axes."""
     shape = BodyShape.from_height(1.7)
     q = walking_qpos(shape, 40, heading_deg=30.0)
     # Camera 2.5 m up, 5 m away; R maps world to camera (OpenCV: x right, y down, z forward).

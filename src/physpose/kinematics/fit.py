@@ -49,7 +49,7 @@ from physpose.observations import Observations
 from physpose.shape import BodyShape
 from physpose.skeleton import NQ
 
-KINEMATICS_VERSION = 9  # bump when a change alters the result for the same input and config
+KINEMATICS_VERSION = 10  # bump when a change alters the result for the same input and config
 Log = Callable[[str], None]
 
 

@@ -13,8 +13,13 @@ is up, and crouching or bending frames count less too) and a weak one that the c
 about its optical axis is small. The balance term is averaged over all frames, so a clip with
 many low frames has a weaker prior. The rise is measured along the candidate normal, so the
 weights change as the search moves. The plane is searched from several starts (the level
-camera's up, the mean balance direction, the normal of the lowest foot points) and the best
-minimum wins.
+camera's up, the mean balance direction, the normal of the lowest foot points), each also with
+the level camera's up reversed, and the best minimum wins. The reversed starts find the floor
+under a camera held upside down (rolled by about a half turn, with no rotation tag in the
+video), which sees the person head-down: from the level camera's up alone, the floor of three
+simulated clips came out upside down at rolls of 150 and 180 degrees, the head 1.2-1.4 m below
+the ankles. Where the camera is upright, the reversed floor (the person standing on a ceiling,
+the feet off it) is far worse in the contact terms and costs the roll prior a half turn too.
 
 Monocular depth errors are correlated with the distance: on the pose2sim views the estimated
 depth varies 0.65-1.4 x as much as the true one. Feet at the wrong depth along their rays
@@ -123,10 +128,12 @@ def estimate_plane(points: np.ndarray, left: np.ndarray, right: np.ndarray, com:
     """
     points = np.asarray(points, dtype=float)
     feet = np.flatnonzero(left | right)
-    balance, lever = balance_directions(points, com, UP_LEVEL)
-    mean = (lever[:, None] * balance).sum(axis=0) if lever.sum() > 0 else balance.mean(axis=0)
-    starts = [UP_LEVEL, mean / np.linalg.norm(mean)]
-    starts.append(_lowest_foot_normal(points, feet, starts[1]))
+    starts = []
+    for up in (UP_LEVEL, -UP_LEVEL):  # a camera upright, and one upside down
+        balance, lever = balance_directions(points, com, up)
+        mean = (lever[:, None] * balance).sum(axis=0) if lever.sum() > 0 else balance.mean(0)
+        starts += [up, mean / np.linalg.norm(mean)]
+        starts.append(_lowest_foot_normal(points, feet, starts[-1]))
     best = min((_descend(points, left, right, com, n0, cfg) for n0 in starts),
                key=lambda r: r[0])
     value, n, d = best
