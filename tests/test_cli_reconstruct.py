@@ -59,6 +59,7 @@ def _args(*argv: str):
     (["--person", "-.5,-3"], "--person -0.5,-3 is outside the"),
     (["--camera", "{missing}.json"], "camera file not found"),
     (["--camera", "{bad_json}"], "cannot read camera intrinsics"),
+    (["--camera", "{oblong_json}"], "fx = 300 and fy = 330 px: physpose fits one focal"),
     (["--camera", "{good_json}", "--camera-name", "cam01"], "applies to a Qualisys"),
     (["--out", "{good_json}"], "exists and is not a folder"),
 ])
@@ -66,8 +67,10 @@ def test_bad_input_gives_a_message_and_exit_2(clip, tmp_path, capsys, argv, mess
     (tmp_path / "bad.json").write_text('{"K": [[1, 2], [3]]}')
     (tmp_path / "good.json").write_text(json.dumps({"K": [[300, 0, 160], [0, 300, 120],
                                                           [0, 0, 1]]}))
+    (tmp_path / "oblong.json").write_text(json.dumps({"K": [[300, 0, 160], [0, 330, 120],
+                                                            [0, 0, 1]]}))
     where = {"missing": tmp_path / "nope", "bad_json": tmp_path / "bad.json",
-             "good_json": tmp_path / "good.json"}
+             "good_json": tmp_path / "good.json", "oblong_json": tmp_path / "oblong.json"}
     argv = [a.format(**where) for a in argv]
     assert main(["reconstruct", str(clip), "--out", str(tmp_path / "out"), *argv]) == 2
     err = capsys.readouterr().err

@@ -20,6 +20,9 @@ from physpose.pinhole import focal_from_fov, intrinsics  # noqa: F401 (the fit's
 UP_LEVEL = np.array([0.0, -1.0, 0.0])  # the up direction of a level camera, camera axes
 
 
+SQUARE_PIXELS = 0.01  # fy / fx may differ from 1 by this much (calibrations: about 1e-4)
+
+
 def check_intrinsics(K: np.ndarray, source: str) -> np.ndarray:
     """K as a float (3, 3) array; PhysposeError if it is not a plausible pinhole matrix."""
     K = np.asarray(K, dtype=float)
@@ -27,6 +30,11 @@ def check_intrinsics(K: np.ndarray, source: str) -> np.ndarray:
             or not np.allclose(K[2], [0.0, 0.0, 1.0]):
         raise PhysposeError(f"camera intrinsics {K.tolist()} are not a pinhole matrix",
                             path=source, remedy="give K = [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]")
+    if abs(K[1, 1] / K[0, 0] - 1.0) > SQUARE_PIXELS:
+        raise PhysposeError(f"camera intrinsics have fx = {K[0, 0]:g} and fy = {K[1, 1]:g} px: "
+                            "physpose fits one focal length (square pixels), and would drop fy",
+                            path=source, remedy="resample the video to square pixels (its height "
+                            "scaled by fx / fy, cy with it) and give K with fy = fx")
     return K
 
 
