@@ -281,11 +281,11 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
             _log.warning("%s", str(note).replace(_Notes.VIDEO, str(video)))
         return _from_arrays(hit, source=str(video))
     notes = _Notes(video)
-    _log.addHandler(notes)
+    _log.addFilter(notes)
     try:
         obs = _observe_uncached(video, info, plan, cfg, progress)
     finally:
-        _log.removeHandler(notes)
+        _log.removeFilter(notes)
     if cfg.use_cache:
         cache.put(key, {**_to_arrays(obs), NOTES_KEY: np.array(notes.messages, dtype=str)})
     return obs
@@ -294,19 +294,23 @@ def observe(video: str | Path, cfg: ObserveConfig = ObserveConfig(), *,
 NOTES_KEY = "observe_notes"  # the warnings of the run, kept with its cached result
 
 
-class _Notes(logging.Handler):
+class _Notes(logging.Filter):
     """Collects the warnings observe logs, so that a result served from the cache can give
-    them again (a variable frame rate, a person followed in a crop or found backwards...)."""
+    them again (a variable frame rate, a person followed in a crop or found backwards...).
+    A filter, not a handler: it lets every record through, and a handler on the logger would
+    keep Python's last-resort output from printing them where no logging is configured."""
 
     VIDEO = "<video>"  # stands for the video's path, which a cache hit may not share
 
     def __init__(self, video: Path) -> None:
-        super().__init__(logging.WARNING)
+        super().__init__()
         self.video = str(video)
         self.messages: list[str] = []
 
-    def emit(self, record: logging.LogRecord) -> None:
-        self.messages.append(record.getMessage().replace(self.video, self.VIDEO))
+    def filter(self, record: logging.LogRecord) -> bool:
+        if record.levelno >= logging.WARNING:
+            self.messages.append(record.getMessage().replace(self.video, self.VIDEO))
+        return True
 
 
 def _observe_uncached(video: Path, info: videolib.VideoInfo, plan: videolib.FramePlan,
