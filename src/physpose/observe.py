@@ -14,10 +14,12 @@ MediaPipe's tracker follows one person and, when it loses that person, takes whi
 its detector finds next. When the detections jump like that (`diagnostics.person_jumps`), the
 video is looked at a second time with every frame masked to where the subject can be (the
 longest track and the tracks continuing it; subject.py), and that result is kept if it jumps
-less. Videos whose detections do not jump are looked at once. A user who wants another person
-than the one physpose would pick names them by a point on them in the first analysed frame
-(`person`, `--person X,Y`): the detector then only ever sees the image around that person's
-last detection (subject.Follower), and the automatic second look is skipped.
+less. Videos whose detections do not jump are looked at once. Where the whole picture changes
+at once (a cut in an edited video, scene_cuts.py), observe warns with the cut's time. A user
+who wants another person than the one physpose would pick names them by a point on them in
+the first analysed frame (`person`, `--person X,Y`): the detector then only ever sees the
+image around that person's last detection (subject.Follower), and the automatic second look
+is skipped.
 
 A person too small for MediaPipe's detector, which sees the whole frame shrunk to a couple of
 hundred pixels (under about a third of the image height), is found in none or some frames. When
@@ -68,10 +70,11 @@ from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
 from physpose.mask_quality import band_limit, band_width, unsure_frames
 from physpose.observations import Observations
+from physpose.scene_cuts import Signature, cut_message, is_cut
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 11  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 12  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 HEAD_WARMUP = 3            # frames past the first sure detection the backward pass starts at
@@ -317,7 +320,7 @@ def _observe_uncached(video: Path, info: videolib.VideoInfo, plan: videolib.Fram
                       cfg: ObserveConfig, progress: bool) -> Observations:
     """observe() past its cache: detect, look again where needed, leave out torn detections,
     map a turning camera's detections into the middle frame's view."""
-    obs = _detect_all(info, plan, cfg, progress, check=False, timing_check=True)
+    obs = _detect_all(info, plan, cfg, progress, check=False, video_checks=True)
     zoomed, seed, masked_to = False, None, None
     if cfg.person is None and obs.detected.sum() < cfg.min_detection_fraction * obs.num_frames:
         # Perhaps the person is too small for the detector's view of the whole frame: look
@@ -362,11 +365,12 @@ def _observe_uncached(video: Path, info: videolib.VideoInfo, plan: videolib.Fram
 
 def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig,
                 progress: bool, regions: np.ndarray | None = None, check: bool = True,
-                zoom: Follower | None = None, timing_check: bool = False) -> Observations:
+                zoom: Follower | None = None, video_checks: bool = False) -> Observations:
     """Detect in every planned frame; regions (T, 4): image boxes outside which each frame is
     blacked out first (subject.py); zoom: follow the person in a crop around their last
     detection, starting from this follower. check: fail when too few frames have a
-    detection. timing_check: warn when the frames are not evenly spaced in time."""
+    detection. video_checks: warn when the frames are not evenly spaced in time, and where
+    the video cuts (scene_cuts.py)."""
     t = len(plan.indices)
     kp = np.zeros((t, NUM_LANDMARKS, 3))
     world = np.zeros((t, NUM_LANDMARKS, 3))
@@ -382,9 +386,16 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
                leave=False)
     with bar, PoseDetector(cfg) as detector:
         times: list[float] = []
+        cuts: list[int] = []
+        before = None
         for i, (_, image) in enumerate(videolib.read_frames(info, plan.indices, times)):
             read = i + 1
             bar.update()
+            if video_checks:
+                after = Signature(image)
+                if before is not None and is_cut(before, after):
+                    cuts.append(i)
+                before = after
             if zoom is not None:
                 found = detect_in_crop(detector, image, zoom.region(),
                                        (mh, mw) if masks is not None else None)
@@ -402,9 +413,11 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
             kp[i], world[i] = found.keypoints2d, found.world_landmarks
             if masks is not None and found.mask is not None:
                 masks[i] = found.mask
-    if timing_check and (message := videolib.drift_message(
+    if video_checks and (message := videolib.drift_message(
             info, videolib.timing_drift(info, plan.indices, times))):
         _log.warning("%s", message)
+    if message := cut_message([float(plan.timestamps[i]) for i in cuts]):
+        _log.warning("%s: %s", info.path, message)
     if read < t:  # the file ended a little early (within the container's counting slack)
         kp, world, detected = kp[:read], world[:read], detected[:read]
         masks = None if masks is None else masks[:read]

@@ -1,0 +1,75 @@
+"""Cuts in a video: found where the whole picture changes at once, not where the camera pans
+or the light changes, and told by the observe stage with their times."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from physpose.observe import ObserveConfig, _detect_all
+from physpose.scene_cuts import Signature, cut_message, is_cut
+from physpose.video import plan_frames, probe
+
+
+def _scene(seed: int, size=(320, 180)) -> np.ndarray:
+    """A picture of coloured blocks on a coloured ground, larger than `size` so that it can
+    pan; another seed gives other colours."""
+    rng = np.random.default_rng(seed)
+    height, width = size[1] + 40, size[0] + 80
+    picture = np.empty((height, width, 3), np.uint8)
+    picture[:] = rng.integers(0, 256, 3)
+    for _ in range(12):
+        x, y = rng.integers(0, width - 40), rng.integers(0, height - 30)
+        w, h = rng.integers(20, 120), rng.integers(15, 80)
+        picture[y:y + h, x:x + w] = rng.integers(0, 256, 3)
+    return cv2.GaussianBlur(picture, (0, 0), 1.5)
+
+
+def _view(scene: np.ndarray, dx: int, size=(320, 180)) -> np.ndarray:
+    return np.ascontiguousarray(scene[20:20 + size[1], dx:dx + size[0]])
+
+
+def test_a_pan_or_a_change_of_light_is_not_a_cut_but_another_picture_is():
+    a, b = _scene(0), _scene(1)
+    first = Signature(_view(a, 0))
+    assert not is_cut(first, Signature(_view(a, 6)))                       # the camera pans
+    brighter = cv2.convertScaleAbs(_view(a, 0), alpha=1.0, beta=12)
+    assert not is_cut(first, Signature(brighter))                          # exposure changes
+    assert is_cut(first, Signature(_view(b, 0)))                           # another shot
+    assert is_cut(Signature(np.zeros_like(_view(a, 0))), first)            # from black
+    assert cut_message([]) is None
+    assert "cuts at 0.40, 2.00 s" in cut_message([0.4, 2.0])
+
+
+def test_observe_says_where_the_video_cuts(tmp_path, caplog):
+    path = tmp_path / "two_shots.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25, (320, 180))
+    for i in range(20):
+        writer.write(_view(_scene(0 if i < 10 else 1), 2 * (i % 10)))
+    writer.release()
+    info = probe(path)
+    with caplog.at_level("WARNING", logger="physpose.observe"):
+        _detect_all(info, plan_frames(info, 25), ObserveConfig(use_cache=False), progress=False,
+                    check=False, video_checks=True)
+    assert "the video cuts at 0.40 s" in caplog.text and str(path) in caplog.text
+
+
+def test_the_command_line_prints_the_cut(tmp_path):
+    # Where no logging is configured (the console script), observe's warnings reach stderr
+    # through Python's last resort; collecting them for the cache must not swallow them.
+    path = tmp_path / "two_shots.avi"
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"MJPG"), 25, (320, 180))
+    for i in range(20):
+        writer.write(_view(_scene(0 if i < 10 else 1), 2 * (i % 10)))
+    writer.release()
+    env = {**os.environ, "PHYSPOSE_CACHE_DIR": str(tmp_path / "cache")}
+    physpose = Path(sys.executable).with_name("physpose")  # the installed console script
+    proc = subprocess.run([str(physpose), "observe", str(path), "--out", str(tmp_path / "out"),
+                           "--no-overlay"], capture_output=True, text=True, env=env, timeout=300)
+    assert "the video cuts at 0.40 s" in proc.stderr      # then: nobody in it, exit 2
+    assert proc.returncode == 2 and "person was found in only 0 of 20" in proc.stderr
