@@ -70,7 +70,7 @@ from physpose.errors import PhysposeError
 from physpose.joints import NUM_LANDMARKS
 from physpose.mask_quality import band_limit, band_width, unsure_frames
 from physpose.observations import Observations
-from physpose.scene_cuts import Signature, cut_message, is_cut
+from physpose.scene_cuts import CutFinder, cut_message
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
@@ -386,16 +386,12 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
                leave=False)
     with bar, PoseDetector(cfg) as detector:
         times: list[float] = []
-        cuts: list[int] = []
-        before = None
+        cuts = CutFinder()
         for i, (_, image) in enumerate(videolib.read_frames(info, plan.indices, times)):
             read = i + 1
             bar.update()
             if video_checks:
-                after = Signature(image)
-                if before is not None and is_cut(before, after):
-                    cuts.append(i)
-                before = after
+                cuts.see(i, image)
             if zoom is not None:
                 found = detect_in_crop(detector, image, zoom.region(),
                                        (mh, mw) if masks is not None else None)
@@ -416,7 +412,7 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
     if video_checks and (message := videolib.drift_message(
             info, videolib.timing_drift(info, plan.indices, times))):
         _log.warning("%s", message)
-    if message := cut_message([float(plan.timestamps[i]) for i in cuts]):
+    if message := cut_message([float(plan.timestamps[i]) for i in cuts.frames]):
         _log.warning("%s: %s", info.path, message)
     if read < t:  # the file ended a little early (within the container's counting slack)
         kp, world, detected = kp[:read], world[:read], detected[:read]

@@ -48,6 +48,20 @@ def is_cut(before: Signature, after: Signature) -> bool:
     return histogram >= HISTOGRAM_CHANGE or pixels >= PIXEL_CHANGE
 
 
+class CutFinder:
+    """Sees a video's frames in order; `frames` are the indices at which it cuts."""
+
+    def __init__(self) -> None:
+        self.frames: list[int] = []
+        self._before: Signature | None = None
+
+    def see(self, index: int, image: np.ndarray) -> None:
+        after = Signature(image)
+        if self._before is not None and is_cut(self._before, after):
+            self.frames.append(index)
+        self._before = after
+
+
 def cut_message(times: list[float]) -> str | None:
     """A warning on the cuts found at these seconds into the video, or None."""
     if not times:
