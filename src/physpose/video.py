@@ -108,6 +108,7 @@ def probe(path: str | Path) -> VideoInfo:
                 count += 1
     finally:
         cap.release()
+    # Under MIN_TARGET_FPS no accepted analysis rate fits (the plan never exceeds the source).
     if not (math.isfinite(fps) and MIN_TARGET_FPS <= fps <= MAX_SOURCE_FPS):
         raise PhysposeError(f"the container reports a frame rate of {fps:g} fps, outside "
                             f"the {MIN_TARGET_FPS:g}-{MAX_SOURCE_FPS:g} fps physpose reads",
