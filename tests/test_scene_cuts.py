@@ -11,8 +11,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from physpose.observe import ObserveConfig, _detect_all
-from physpose.scene_cuts import Signature, cut_message, is_cut
+from physpose.observations import Observations
+from physpose.observe import ObserveConfig, _detect_all, unbridge_cuts
+from physpose.scene_cuts import CutFinder, Signature, cut_message, is_cut
 from physpose.video import plan_frames, probe
 
 
@@ -55,8 +56,50 @@ def test_observe_says_where_the_video_cuts(tmp_path, caplog):
     info = probe(path)
     with caplog.at_level("WARNING", logger="physpose.observe"):
         _detect_all(info, plan_frames(info, 25), ObserveConfig(use_cache=False), progress=False,
-                    check=False, video_checks=True)
+                    check=False, cuts=(cuts := CutFinder()))
     assert "the video cuts at 0.40 s" in caplog.text and str(path) in caplog.text
+    assert cuts.frames == [10]
+
+
+def _finder(pictures: list[np.ndarray]) -> CutFinder:
+    finder = CutFinder()
+    for i, picture in enumerate(pictures):
+        finder.see(i, picture)
+    return finder
+
+
+def test_a_blackout_within_a_shot_is_no_cut_but_a_change_of_shot_is():
+    a, b = _scene(0), _scene(1)
+    black = np.zeros_like(_view(a, 0))
+    blackout = _finder([_view(a, k) for k in range(10)] + [black, black]
+                       + [_view(a, 10 + k) for k in range(3)])
+    assert blackout.frames == [] and not blackout.between(9, 12)
+    to_black_and_on = _finder([_view(a, k) for k in range(10)] + [black, black]
+                              + [_view(b, k) for k in range(3)])
+    assert to_black_and_on.frames == [10] and to_black_and_on.between(9, 12)
+
+
+def test_a_gap_filled_across_a_cut_is_left_open_and_others_stay_filled():
+    # Detections at 0-2, 5-9 and 12-14; the gaps 3-4 and 10-11 were interpolated. The video
+    # cuts at frame 11 to another scene: the person after it may be another one.
+    t = 15
+    a, b = _scene(0), _scene(1)
+    cuts = _finder([_view(a, k) for k in range(11)] + [_view(b, k) for k in range(4)])
+    assert cuts.frames == [11]
+    detected = np.ones(t, bool)
+    detected[[3, 4, 10, 11]] = False
+    keypoints = np.random.default_rng(0).uniform(40, 140, (t, 33, 3))
+    keypoints[..., 2] = 0.9
+    obs = Observations(source="clip", fps=25.0, image_size=(320, 180),
+                       timestamps=np.arange(t) / 25.0, keypoints2d=keypoints,
+                       detected=detected, interpolated=~detected,
+                       world_landmarks=keypoints / 100.0)
+    kept = unbridge_cuts(obs, cuts)
+    assert kept.interpolated.tolist() == [i in (3, 4) for i in range(t)]
+    assert not kept.keypoints2d[10:12].any() and not kept.world_landmarks[10:12].any()
+    np.testing.assert_array_equal(kept.keypoints2d[3:5], keypoints[3:5])
+    np.testing.assert_array_equal(kept.detected, detected)
+    assert unbridge_cuts(obs, _finder([_view(a, k) for k in range(t)])) is obs
 
 
 def test_the_command_line_prints_the_cut(tmp_path):

@@ -15,11 +15,11 @@ its detector finds next. When the detections jump like that (`diagnostics.person
 video is looked at a second time with every frame masked to where the subject can be (the
 longest track and the tracks continuing it; subject.py), and that result is kept if it jumps
 less. Videos whose detections do not jump are looked at once. Where the whole picture changes
-at once (a cut in an edited video, scene_cuts.py), observe warns with the cut's time. A user
-who wants another person than the one physpose would pick names them by a point on them in
-the first analysed frame (`person`, `--person X,Y`): the detector then only ever sees the
-image around that person's last detection (subject.Follower), and the automatic second look
-is skipped.
+at once (a cut in an edited video, scene_cuts.py), observe warns with the cut's time and leaves
+a gap across it unfilled (`unbridge_cuts`). A user who wants another person than the one
+physpose would pick names them by a point on them in the first analysed frame (`person`,
+`--person X,Y`): the detector then only ever sees the image around that person's last
+detection (subject.Follower), and the automatic second look is skipped.
 
 A person too small for MediaPipe's detector, which sees the whole frame shrunk to a couple of
 hundred pixels (under about a third of the image height), is found in none or some frames. When
@@ -74,7 +74,7 @@ from physpose.scene_cuts import CutFinder, cut_message
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 13  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 14  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 HEAD_WARMUP = 3            # frames past the first sure detection the backward pass starts at
@@ -320,7 +320,8 @@ def _observe_uncached(video: Path, info: videolib.VideoInfo, plan: videolib.Fram
                       cfg: ObserveConfig, progress: bool) -> Observations:
     """observe() past its cache: detect, look again where needed, leave out torn detections,
     map a turning camera's detections into the middle frame's view."""
-    obs = _detect_all(info, plan, cfg, progress, check=False, video_checks=True)
+    cuts = CutFinder()
+    obs = _detect_all(info, plan, cfg, progress, check=False, cuts=cuts)
     zoomed, seed, masked_to = False, None, None
     if cfg.person is None and obs.detected.sum() < cfg.min_detection_fraction * obs.num_frames:
         # Perhaps the person is too small for the detector's view of the whole frame: look
@@ -353,6 +354,7 @@ def _observe_uncached(video: Path, info: videolib.VideoInfo, plan: videolib.Fram
         obs = _recover_head(info, plan, cfg, obs, video, masked_to)
     if obs.unsure is not None:
         _check_detection_rate(info.path, int(obs.detected.sum()), obs.num_frames, cfg)
+    obs = unbridge_cuts(obs, cuts)
     if cfg.stabilize:
         motion = estimate_camera_motion(info, plan, obs)
         obs = stabilize(obs, motion)
@@ -365,12 +367,12 @@ def _observe_uncached(video: Path, info: videolib.VideoInfo, plan: videolib.Fram
 
 def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: ObserveConfig,
                 progress: bool, regions: np.ndarray | None = None, check: bool = True,
-                zoom: Follower | None = None, video_checks: bool = False) -> Observations:
+                zoom: Follower | None = None, cuts: CutFinder | None = None) -> Observations:
     """Detect in every planned frame; regions (T, 4): image boxes outside which each frame is
     blacked out first (subject.py); zoom: follow the person in a crop around their last
     detection, starting from this follower. check: fail when too few frames have a
-    detection. video_checks: warn when the frames are not evenly spaced in time, and where
-    the video cuts (scene_cuts.py)."""
+    detection. cuts: given on the first look, it is shown every frame, and the look warns
+    where the video cuts (scene_cuts.py) and where its frames are not evenly spaced in time."""
     t = len(plan.indices)
     kp = np.zeros((t, NUM_LANDMARKS, 3))
     world = np.zeros((t, NUM_LANDMARKS, 3))
@@ -386,11 +388,10 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
                leave=False)
     with bar, PoseDetector(cfg) as detector:
         times: list[float] = []
-        cuts = CutFinder()
         for i, (_, image) in enumerate(videolib.read_frames(info, plan.indices, times)):
             read = i + 1
             bar.update()
-            if video_checks:
+            if cuts is not None:
                 cuts.see(i, image)
             if zoom is not None:
                 found = detect_in_crop(detector, image, zoom.region(),
@@ -409,10 +410,11 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
             kp[i], world[i] = found.keypoints2d, found.world_landmarks
             if masks is not None and found.mask is not None:
                 masks[i] = found.mask
-    if video_checks and (message := videolib.drift_message(
+    if cuts is not None and (message := videolib.drift_message(
             info, videolib.timing_drift(info, plan.indices, times))):
         _log.warning("%s", message)
-    if message := cut_message([float(plan.timestamps[i]) for i in cuts.frames]):
+    if cuts is not None and (message := cut_message([float(plan.timestamps[i])
+                                                      for i in cuts.frames])):
         _log.warning("%s: %s", info.path, message)
     if read < t:  # the file ended a little early (within the container's counting slack)
         kp, world, detected = kp[:read], world[:read], detected[:read]
@@ -426,6 +428,28 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
         timestamps=plan.timestamps[:read].astype(np.float64), keypoints2d=kp, detected=detected,
         interpolated=interpolated, world_landmarks=world, masks=masks,
         frame_indices=plan.indices[:read].astype(np.int64))
+
+
+def unbridge_cuts(obs: Observations, cuts: CutFinder) -> Observations:
+    """The observations with every gap that was filled between two shots (its detections
+    on either side of a cut, in pictures unlike each other) left unfilled: the two may be two
+    people or two places, and no motion joins them. A blackout or a flash within one shot
+    stays filled."""
+    interpolated = np.asarray(obs.interpolated, dtype=bool)
+    hits = np.flatnonzero(obs.detected)
+    clear = np.zeros_like(interpolated)
+    for a, b in zip(hits[:-1], hits[1:]):
+        if b - a > 1 and interpolated[a + 1:b].any() and cuts.between(int(a), int(b)):
+            clear[a + 1:b] = True
+    if not clear.any():
+        return obs
+
+    def emptied(values: np.ndarray | None) -> np.ndarray | None:
+        return None if values is None else np.where(
+            clear.reshape((-1,) + (1,) * (values.ndim - 1)), 0, values).astype(values.dtype)
+
+    return obs.replace(keypoints2d=emptied(obs.keypoints2d), interpolated=interpolated & ~clear,
+                       world_landmarks=emptied(obs.world_landmarks), masks=emptied(obs.masks))
 
 
 def _drop_unsure(obs: Observations, cfg: ObserveConfig) -> Observations:
