@@ -63,8 +63,8 @@ def test_observe_says_where_the_video_cuts(tmp_path, caplog):
 
 def _finder(pictures: list[np.ndarray]) -> CutFinder:
     finder = CutFinder()
-    for i, picture in enumerate(pictures):
-        finder.see(i, picture)
+    for picture in pictures:
+        finder.see(picture)
     return finder
 
 

@@ -392,7 +392,7 @@ def _detect_all(info: videolib.VideoInfo, plan: videolib.FramePlan, cfg: Observe
             read = i + 1
             bar.update()
             if cuts is not None:
-                cuts.see(i, image)
+                cuts.see(image)
             if zoom is not None:
                 found = detect_in_crop(detector, image, zoom.region(),
                                        (mh, mw) if masks is not None else None)

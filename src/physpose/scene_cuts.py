@@ -51,7 +51,7 @@ def is_cut(before: Signature, after: Signature) -> bool:
 
 
 class CutFinder:
-    """Sees a video's frames in order (index i of the i-th frame seen) and keeps their
+    """Sees a video's frames in order (frame i is the i-th seen) and keeps their
     signatures. A run of changes close together (a blackout, a flash, a cut to black and
     back) counts as a cut only where the pictures before and after it differ too."""
 
@@ -59,12 +59,10 @@ class CutFinder:
         self.signatures: list[Signature] = []
         self._changes: list[int] = []  # frames that differ from the frame before them
 
-    def see(self, index: int, image: np.ndarray) -> None:
-        if index != len(self.signatures):
-            raise ValueError("frames must be shown in order")
+    def see(self, image: np.ndarray) -> None:
         self.signatures.append(Signature(image))
-        if index > 0 and is_cut(self.signatures[index - 1], self.signatures[index]):
-            self._changes.append(index)
+        if len(self.signatures) > 1 and is_cut(self.signatures[-2], self.signatures[-1]):
+            self._changes.append(len(self.signatures) - 1)
 
     @property
     def frames(self) -> list[int]:
