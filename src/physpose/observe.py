@@ -443,13 +443,17 @@ def unbridge_cuts(obs: Observations, cuts: CutFinder) -> Observations:
             clear[a + 1:b] = True
     if not clear.any():
         return obs
+    return obs.replace(keypoints2d=_zeroed(obs.keypoints2d, clear),
+                       interpolated=interpolated & ~clear,
+                       world_landmarks=_zeroed(obs.world_landmarks, clear),
+                       masks=_zeroed(obs.masks, clear))
 
-    def emptied(values: np.ndarray | None) -> np.ndarray | None:
-        return None if values is None else np.where(
-            clear.reshape((-1,) + (1,) * (values.ndim - 1)), 0, values).astype(values.dtype)
 
-    return obs.replace(keypoints2d=emptied(obs.keypoints2d), interpolated=interpolated & ~clear,
-                       world_landmarks=emptied(obs.world_landmarks), masks=emptied(obs.masks))
+def _zeroed(values: np.ndarray | None, frames: np.ndarray) -> np.ndarray | None:
+    """A copy of per-frame `values` (T, ...) with the (T,) bool `frames` set to 0 (no
+    detection there); None stays None."""
+    return None if values is None else np.where(
+        frames.reshape((-1,) + (1,) * (values.ndim - 1)), 0, values).astype(values.dtype)
 
 
 def _drop_unsure(obs: Observations, cfg: ObserveConfig) -> Observations:
@@ -461,14 +465,9 @@ def _drop_unsure(obs: Observations, cfg: ObserveConfig) -> Observations:
     if not unsure.any():
         return obs
     detected = obs.detected & ~unsure
-
-    def kept(values: np.ndarray | None) -> np.ndarray | None:
-        return None if values is None else np.where(
-            detected.reshape((-1,) + (1,) * (values.ndim - 1)), values, 0).astype(values.dtype)
-
     kp, world, masks, interpolated = _fill_all_gaps(
-        kept(obs.keypoints2d), kept(obs.world_landmarks), kept(obs.masks), detected,
-        cfg.max_gap_frames)
+        _zeroed(obs.keypoints2d, ~detected), _zeroed(obs.world_landmarks, ~detected),
+        _zeroed(obs.masks, ~detected), detected, cfg.max_gap_frames)
     return obs.replace(keypoints2d=kp, detected=detected, interpolated=interpolated,
                        world_landmarks=world, masks=masks, unsure=unsure)
 
