@@ -198,3 +198,20 @@ def test_bad_input_is_reported(perfect):
         fit_kinematics(obs, KinematicConfig(use_cache=False), camera_K=np.eye(2))
     with pytest.raises(PhysposeError, match="height"):
         fit_kinematics(obs, KinematicConfig(use_cache=False), height=7.0)
+
+
+def test_the_fit_runs_in_double_precision_under_old_and_new_jax(monkeypatch):
+    """JAX 0.8 made 64-bit mode a config context manager (``jax.enable_x64``) and later releases
+    removed ``jax.experimental.enable_x64``, which older ones need: physpose once failed to
+    import under JAX 0.11. Whichever this JAX has, the fit's arrays are float64 inside."""
+    import jax
+    import jax.numpy as jnp
+
+    from physpose.kinematics.fit import _double_precision
+    with _double_precision():
+        assert jnp.zeros(2).dtype == jnp.float64
+    assert jnp.zeros(2).dtype == jnp.float32
+    asked = []
+    monkeypatch.setattr(jax, "enable_x64", lambda value: asked.append(value) or "context",
+                        raising=False)
+    assert _double_precision() == "context" and asked == [True]

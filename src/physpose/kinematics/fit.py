@@ -25,7 +25,6 @@ from dataclasses import dataclass
 
 import jax
 import numpy as np
-from jax.experimental import enable_x64
 from scipy.spatial.transform import Rotation
 
 from physpose import diagnostics, supports
@@ -67,6 +66,15 @@ def enable_compilation_cache() -> None:
 
 def stderr_log(message: str) -> None:
     print(f"kinematics: {message}", file=sys.stderr, flush=True)
+
+
+def _double_precision():
+    """JAX's 64-bit mode for the fit's duration: ``jax.enable_x64(True)`` from JAX 0.8, whose
+    later releases removed the experimental context manager that older ones have."""
+    if hasattr(jax, "enable_x64"):
+        return jax.enable_x64(True)
+    from jax.experimental import enable_x64
+    return enable_x64()
 
 
 def fit_kinematics(observations: Observations, config: KinematicConfig = KinematicConfig(), *,
@@ -212,7 +220,7 @@ def fit_variants(obs: Observations, variants: tuple[str, ...], cfg: KinematicCon
     timer = _Timer(log)
     if cfg.compile_cache:
         enable_compilation_cache()
-    with enable_x64():
+    with _double_precision():
         ctx = _prepare(obs, cfg, height, mass, K, timer)
         focal = not ctx.K_given and cfg.camera.refine_focal
         free = ("root_pos", "root_rotvec", "angles", "log_depth_scale")
