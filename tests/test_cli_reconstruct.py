@@ -13,6 +13,7 @@ from physpose.cli import SUBCOMMANDS, build_parser, main
 from physpose.cli.reconstruct import (camera_intrinsics, parse_formats, pipeline_config,
                                       print_summary, restarts_line, undetected_line)
 from physpose.dynamics import PRESETS
+from physpose.dynamics.config import available_cores
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.errors import PhysposeError
 from physpose.report.data import forces_summary
@@ -46,6 +47,7 @@ def _args(*argv: str):
     (["--searches", "0"], "searches must be >= 1"),
     (["--balance-hz", "-1"], "balance gains"),
     (["--refine", "-2"], "--refine -2 must be >= 0"),
+    (["--threads", "0"], "--threads 0 must be >= 1"),
     (["--weight", "com=-1"], "the weight must be a number >= 0"),
     (["--weight", "com=heavy"], "the weight must be a number >= 0"),
     (["--weight", "balance=1"], "names no objective term"),
@@ -138,6 +140,8 @@ def test_flags_make_the_pipeline_config():
                            ).dynamics.balance.frequency == 0.5
     assert pipeline_config(_args("v.mp4", "--out", "o", "--refine", "3")
                            ).dynamics.refine.iterations == 3
+    assert default.dynamics.nthread == available_cores()
+    assert pipeline_config(_args("v.mp4", "--out", "o", "--threads", "3")).dynamics.nthread == 3
     assert not pipeline_config(_args("v.mp4", "--out", "o", "--refine", "0")
                                ).dynamics.refine.enabled
     assert default.dynamics.reset_distance == 0.15

@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 from types import SimpleNamespace
 
 import pytest
 
 from physpose.dynamics import ABLATIONS, PRESETS, DynamicsConfig, ablated
-from physpose.dynamics.config import REFINE_COUNTERPARTS
+from physpose.dynamics.config import REFINE_COUNTERPARTS, available_cores
 from physpose.dynamics.objective import ObjectiveWeights
 from physpose.dynamics.variants import (EVERY_ATTEMPT, FULL_OBJECTIVE, NO_HOPELESS_RETRY,
                                         SEARCH_ONLY)
@@ -67,6 +68,16 @@ def test_ablating_the_refined_default_removes_the_refinements_counterparts():
     assert ablated(fast, "noprior").refine == fast.refine
     assert ablated(FULL_OBJECTIVE, "no2d").refine == FULL_OBJECTIVE.refine
     assert set(REFINE_COUNTERPARTS) == {t for terms in ABLATIONS.values() for t in terms}
+
+
+def test_rollouts_use_every_core_by_default():
+    """The thread count changes only the time (benchmarks/bench_threads.py checks the result
+    bit for bit), so it defaults to every core this process may use, not a fixed 2."""
+    cores = available_cores()
+    assert cores >= 1 and DynamicsConfig().nthread == cores
+    if hasattr(os, "sched_getaffinity"):
+        assert cores == len(os.sched_getaffinity(0))
+    assert "nthread" not in DynamicsConfig().identity()
 
 
 def test_window_identity_leaves_out_what_does_not_change_the_windows():
