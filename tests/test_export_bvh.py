@@ -127,3 +127,26 @@ def test_real_body_round_trips_through_bvh_and_glb(tmp_path):
     y_up_to_z_up = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
     back = nodes[:, [index[n] for n in motion.tree.names]] @ y_up_to_z_up.T
     assert np.abs(back - motion.pos).max() < 1e-3
+
+
+def test_euler_channels_do_not_flip_through_gimbal_lock():
+    """An arm raised through the horizontal (the ZXY middle angle passing 90 degrees) while it
+    twists: principal Euler values jump by about 180 degrees between neighbouring frames there,
+    which sends an interpolating tool's limb round the flip. The written channels step by at
+    most a few degrees and still give every frame's rotation."""
+    from scipy.spatial.transform import Rotation
+
+    from physpose.export.bvh import continuous_euler
+    t = np.linspace(0.0, 1.0, 60)
+    truth = Rotation.from_euler("ZXY", np.stack([40 * t - 10, 60 + 60 * t, 30 * np.sin(6 * t)],
+                                                axis=1), degrees=True)
+    principal = truth.as_euler("ZXY", degrees=True)
+    assert np.abs(np.diff(principal, axis=0)).max() > 150        # the flip is there to mend
+    channels = continuous_euler(principal)
+    assert np.abs(np.diff(channels, axis=0)).max() < 10
+    back = Rotation.from_euler("ZXY", channels, degrees=True)
+    assert np.degrees((back * truth.inv()).magnitude()).max() < 1e-6
+    # Whole turns are taken out as before (a root yawing round and round).
+    spin = np.stack([np.linspace(0, 1080, 50), np.zeros(50), np.zeros(50)], axis=1)
+    wrapped = Rotation.from_euler("ZXY", spin, degrees=True).as_euler("ZXY", degrees=True)
+    assert np.allclose(continuous_euler(wrapped), spin, atol=1e-6)

@@ -85,8 +85,8 @@ def motion_to_clip(motion: BodyMotion, fps: float) -> BvhClip:
         moving = tree.parents[b] < 0 or np.ptp(local_pos[:, b], axis=0).max() > _FIXED_OFFSET_TOL
         offset = np.zeros(3) if tree.parents[b] < 0 else local_pos[:, b].mean(axis=0)
         offsets.append(offset)
-        euler = Rotation.from_matrix(local_rot[:, b]).as_euler(_EULER, degrees=True)
-        euler = np.unwrap(euler, period=360.0, axis=0)
+        euler = continuous_euler(Rotation.from_matrix(local_rot[:, b]).as_euler(_EULER,
+                                                                                degrees=True))
         if moving:
             channels.append(_POS_CHANNELS + _ROT_CHANNELS)
             columns.append(np.concatenate([local_pos[:, b] - offset, euler], axis=1))
@@ -103,6 +103,25 @@ def motion_to_clip(motion: BodyMotion, fps: float) -> BvhClip:
                    offsets=np.array(offsets)[order], channels=tuple(channels[b] for b in order),
                    end_sites={new[b]: e for b, e in ends.items()}, frame_time=1.0 / fps,
                    motion=np.concatenate([columns[b] for b in order], axis=1))
+
+
+def continuous_euler(euler: np.ndarray) -> np.ndarray:
+    """(T, 3) Tait-Bryan angles in degrees, each frame's rewritten as the equivalent triple
+    nearest the previous frame's: whole turns added, or (a, b, c) -> (a + 180, 180 - b,
+    c + 180), the same rotation. Near the middle angle's +-90 degrees (a shoulder raised to
+    the horizontal) the principal values flip by about 180 degrees between frames that barely
+    differ, and a tool interpolating the channels swings the limb through the flip."""
+    out = np.array(euler, dtype=float, copy=True)
+    for t in range(1, len(out)):
+        a, b, c = out[t]
+        best = None
+        for cand in (np.array([a, b, c]), np.array([a + 180.0, 180.0 - b, c + 180.0])):
+            cand = cand + 360.0 * np.round((out[t - 1] - cand) / 360.0)
+            cost = float(np.sum((cand - out[t - 1]) ** 2))
+            if best is None or cost < best[0]:
+                best = (cost, cand)
+        out[t] = best[1]
+    return out
 
 
 def _preorder(parents: tuple[int, ...]) -> list[int]:
