@@ -38,6 +38,13 @@ def test_export_into_a_folder_writes_the_default_name_there(results, tmp_path):
     assert (tmp_path / "joints.csv").read_text().startswith("frame")
 
 
+def test_export_into_a_new_folder_named_with_a_separator_makes_it(results, tmp_path):
+    # (such a folder had become a file named like it)
+    assert main(["export", str(results["kinematic"]), "-f", "bvh", "--out",
+                 str(tmp_path / "new") + "/"]) == 0
+    assert (tmp_path / "new" / "motion.bvh").read_text().startswith("HIERARCHY")
+
+
 def test_export_of_a_reconstruction_in_memory_says_to_save_it_first(results):
     from physpose.export import export
     from physpose.reconstruction import Reconstruction
@@ -74,6 +81,12 @@ def test_report(results, capsys):
     (["overlay", "{physics}", "--out", "{empty}/o.txt"], "--out does not end in .mp4"),
     (["overlay", "{physics}", "--png-frame", "0", "--out", "{empty}/o.mp4"],
      "--out does not end in .png"),
+    (["export", "{physics}", "-f", "forces", "-o", "{physics}/reconstruction.npz"],
+     "forces export to a file that does not end in .csv"),
+    (["export", "{physics}", "-f", "glb", "-o", "{empty}/walk.bvh"],
+     "glb export to a file that does not end in .glb"),
+    (["export", "{physics}", "-f", "bvh", "-o", "{empty}/new"],
+     "or a folder (ending in /) to write motion.bvh into"),
 ])
 def test_bad_input_gives_a_message_and_exit_2(results, tmp_path, capsys, argv, message):
     (tmp_path / "empty").mkdir()

@@ -26,8 +26,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("result", type=Path, metavar="RESULT_DIR", help=_RESULT_HELP)
     p.add_argument("--format", "-f", required=True, choices=FORMATS, dest="fmt",
                    help="file format")
-    p.add_argument("--out", "-o", type=Path, default=None,
-                   help="output file, or a folder to write the default name into (default: "
+    # A string, not a Path: a trailing "/" (a folder to make) must survive.
+    p.add_argument("--out", "-o", default=None,
+                   help="output file with the format's suffix, or a folder (made if the name "
+                        "ends in /) to write the default name into (default: "
                         "RESULT_DIR/" + ", ".join(
                             f"{n} for {f}" for f, n in DEFAULT_NAMES.items()) + ")")
     p.add_argument("--motion", choices=MOTIONS, default=None,

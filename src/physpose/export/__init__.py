@@ -35,9 +35,7 @@ def export(result_dir: str | Path, fmt: str, out: str | Path | None = None,
                 "Reconstruction in memory: save it into one first, rec.save(folder / "
                 "'reconstruction.npz'))")
     rec, folder = load_result(result_dir)
-    out = folder if out is None else Path(out)
-    if out.is_dir():  # a folder: the format's default name inside it
-        out = out / DEFAULT_NAMES[fmt]
+    out = _target(folder, fmt, out)
     if fmt == "forces":
         if motion == "kinematic":
             raise PhysposeError("only the physics motion has forces", path=folder,
@@ -53,3 +51,22 @@ def export(result_dir: str | Path, fmt: str, out: str | Path | None = None,
                             "export needs", path=folder,
                             remedy="export csv or json, or re-run the reconstruction")
     return (write_bvh if fmt == "bvh" else write_glb)(body, rec.fps, out)
+
+
+def _target(folder: Path, fmt: str, out: str | Path | None) -> Path:
+    """The file to write: the format's default name in ``out`` when it is a folder (or ends in
+    a separator: then made), else ``out`` itself, which must carry the format's suffix (an
+    export had been written over reconstruction.npz, and glTF bytes into a .bvh)."""
+    name = DEFAULT_NAMES[fmt]
+    if out is None:
+        return folder / name
+    if str(out).endswith(("/", os.sep)) or Path(out).is_dir():
+        Path(out).mkdir(parents=True, exist_ok=True)
+        return Path(out) / name
+    out = Path(out)
+    suffix = Path(name).suffix
+    if out.suffix.lower() != suffix:
+        raise PhysposeError(f"{fmt} export to a file that does not end in {suffix}", path=out,
+                            remedy=f"name a {suffix} file, or a folder (ending in /) to write "
+                                   f"{name} into")
+    return out
