@@ -199,6 +199,13 @@ def test_summary_lists_metrics_files_and_times(tmp_path, capsys):
     assert "float (% frames)" in out and "12.5" in out
     assert "report.html" in out and "reconstruction.npz" in out
     assert "dynamics 3.5 s" in out and "total 6.5 s" in out
+    assert "into the video" not in out  # a result that does not record where it lies
+    # One that does says where its frames are in the video, once (the tables carry it too).
+    rec = make_reconstruction(num_frames=5, meta={"frame_indices": [24, 26, 29, 31, 34],
+                                                  "timestamps": [0.4, 0.44, 0.48, 0.52, 0.56]})
+    print_summary(rec, folder, {}, None, {})
+    assert "they are 0.40-0.56 s (frames 24-34) into the video; the times below count from " \
+           "the first of them" in capsys.readouterr().out
     # The simulated forces in one line.
     line = forces_summary(make_reconstruction(num_frames=5))
     assert line.startswith("peak vertical ground reaction force")

@@ -86,7 +86,7 @@ def test_forces_table_round_trip(tmp_path):
     with path.open() as f:
         rows = list(csv.DictReader(f))
     assert tuple(rows[0]) == forces_columns() and len(rows) == 20
-    assert len(forces_columns()) == 2 + 9 + 6 + 48
+    assert len(forces_columns()) == 2 + 9 + 6 + 48 + 2
     fz = np.array([[float(r["l_foot_fz_n"]), float(r["r_foot_fz_n"])] for r in rows])
     assert np.abs(fz - rec.grf_physics[:, :2, 2]).max() < 1e-6
     torque = np.array([float(r["r_knee_y_torque_nm"]) for r in rows])
@@ -95,6 +95,37 @@ def test_forces_table_round_trip(tmp_path):
     airborne = np.isnan(rec.cop_physics[:, 0, 0])
     assert airborne.any() and all((r["l_cop_x_m"] == "") == a for r, a in zip(rows, airborne))
     assert float(rows[3]["time"]) == pytest.approx(3 / rec.fps)
+
+
+def test_tables_say_where_each_frame_is_in_the_video(tmp_path):
+    """A result of --start 2 (or with unseen first frames left out) begins some way into the
+    video: the tables carry each frame's place there, in seconds of the footage (slow motion
+    included) and in the video's own frames; a result without them leaves the cells empty."""
+    folder = save_result(tmp_path / "old", num_frames=5)
+    rec = Reconstruction.load(folder / "reconstruction.npz")
+    assert rec.video_times is None and rec.video_frames is None
+    with export(folder, "csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert rows[0]["video_time"] == rows[0]["video_frame"] == ""
+    assert json.loads(export(folder, "json").read_text())["video_times"] is None
+    timed = rec.replace(meta={**rec.meta, "slow_motion": 2.0, "frame_indices": [60, 62, 65, 67, 70],
+                              "timestamps": [1.0, 1.04, 1.08, 1.12, 1.16]})
+    later = tmp_path / "later"
+    later.mkdir()
+    timed.save(later / "reconstruction.npz")
+    with export(later, "csv").open() as f:
+        rows = [r for r in csv.DictReader(f) if r["joint"] == rec.joint_names[0]]
+    rows = rows[:5]  # the first motion's
+    assert [float(r["video_time"]) for r in rows] == pytest.approx([2.0, 2.08, 2.16, 2.24, 2.32])
+    assert [int(r["video_frame"]) for r in rows] == [60, 62, 65, 67, 70]
+    assert float(rows[1]["time"]) == pytest.approx(1 / rec.fps)  # still from the first frame
+    doc = json.loads(export(later, "json").read_text())
+    assert doc["video_frames"] == [60, 62, 65, 67, 70] and doc["video_times"][-1] == 2.32
+    with export(later, "forces").open() as f:
+        rows = list(csv.DictReader(f))
+    assert rows[4]["video_frame"] == "70" and float(rows[4]["video_time"]) == pytest.approx(2.32)
+    np.testing.assert_allclose(timed.footage_seconds([0, 4]), [2.0, 2.32])
+    np.testing.assert_allclose(rec.footage_seconds([0, 4]), [0.0, 4 / rec.fps])
 
 
 def test_forces_need_a_physics_result(tmp_path):

@@ -100,8 +100,12 @@ def test_frames_before_and_after_the_person_is_in_view_are_left_out():
     np.testing.assert_array_equal(kept.timestamps, obs.timestamps[4:t - 3])
     np.testing.assert_array_equal(kept.keypoints2d, obs.keypoints2d[4:t - 3])
     assert kept.masks is None or len(kept.masks) == t - 7
-    line = trimmed_message(trimmed, t, obs.fps)
+    line = trimmed_message(trimmed, t, obs.fps)  # a result from before the times were kept
     assert f"before {4 / obs.fps:.2f} s" in line and f"after {(t - 3) / obs.fps:.2f} s" in line
+    # Seconds into the video, what --start/--end take (here the clip began 2 s in).
+    line = trimmed_message(trimmed, t, obs.fps, [2.0 + 4 / obs.fps, 2.0 + (t - 4) / obs.fps])
+    assert f"not seen before {2 + 4 / obs.fps:.2f} s or after {2 + (t - 4) / obs.fps:.2f} s " \
+           "into the video" in line and f"first frame is {2 + 4 / obs.fps:.2f} s" in line
     # A clip seen throughout, or one seen in fewer than 3 frames, is left whole.
     assert trim_unseen_ends(obs) == (obs, None)
     unseen[:-2] = True
@@ -146,7 +150,7 @@ def test_reconstruct_writes_the_contract(tmp_path):
     # A clean simulated clip raises none of the input warnings (physpose.diagnostics).
     found = dict(loaded.meta["diagnostics"])
     assert found.pop("camera_height") > LOW_CAMERA  # the floor from a standing body
-    assert found == {"trimmed": None, "observed_frames": t,
+    assert found == {"trimmed": None, "trimmed_times": None, "observed_frames": t,
                      "camera_motion": None, "unsure_detections": [], "person_jumps": [],
                      "person_jump_times": [], "hidden_feet": 0.0, "raised": [], "supports": [], "seated": [],
                      "seats": [], "invalid_windows": [], "unrecorded_forces": [],

@@ -202,3 +202,14 @@ def test_input_warnings_are_listed_in_the_summary(tmp_path):
     assert "jumps further than a body moves" in warnings[0] and "--start/--end" in warnings[0]
     assert "no simulated motion stayed valid" in warnings[1]
     assert all(k != "warning" for k, _ in summary_rows(make_reconstruction(12), tmp_path))
+
+
+def test_the_summary_says_where_the_result_lies_in_its_video(tmp_path):
+    rec = make_reconstruction(num_frames=3, meta={"source": "walk.mp4",
+                                                  "frame_indices": [60, 61, 62],
+                                                  "timestamps": [1.0, 1.02, 1.04],
+                                                  "slow_motion": 2.0})
+    rows = summary_rows(rec, tmp_path)
+    assert rows[1] == ("video", "walk.mp4")
+    assert rows[2] == ("in the video", "2.00-2.08 s (frames 60-62)")  # footage seconds
+    assert "in the video" not in dict(summary_rows(make_reconstruction(num_frames=3), tmp_path))

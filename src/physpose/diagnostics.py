@@ -282,18 +282,27 @@ def rate_message(fps: float) -> str | None:
             "Conventions and limits). Use --fps 25 unless the motion needs more")
 
 
-def trimmed_message(trimmed: list[int] | None, total: int, fps: float) -> str | None:
+def trimmed_message(trimmed: list[int] | None, total: int, fps: float,
+                    times: list[float] | None = None) -> str | None:
     """A note on the frames left out before and after the person is seen (no detection, or
     only ones observe left out as torn), or None. trimmed: [first, last] frames kept of
-    `total`."""
+    `total`; times: seconds into the footage of those two frames (results written before
+    stop 74 have none: then seconds from the first analysed frame)."""
     if not trimmed:
         return None
     first, last = trimmed
-    parts = [f"before {first / fps:.2f} s" if first > 0 else "",
-             f"after {(last + 1) / fps:.2f} s" if last < total - 1 else ""]
-    return (f"input: the person is not seen {' or '.join(p for p in parts if p)} (of "
-            f"{total / fps:.2f} s analysed): only frames {first}-{last} are reconstructed (the "
-            "output's frame_indices and times say which video frames those are)")
+    if times is None:
+        parts = [f"before {first / fps:.2f} s" if first > 0 else "",
+                 f"after {(last + 1) / fps:.2f} s" if last < total - 1 else ""]
+        return (f"input: the person is not seen {' or '.join(p for p in parts if p)} (of "
+                f"{total / fps:.2f} s analysed): only frames {first}-{last} are reconstructed "
+                "(the output's frame_indices say which video frames those are)")
+    parts = [f"before {times[0]:.2f} s" if first > 0 else "",
+             f"after {times[1]:.2f} s" if last < total - 1 else ""]
+    return (f"input: the person is not seen {' or '.join(p for p in parts if p)} into the "
+            f"video: only frames {first}-{last} of the {total} analysed are reconstructed, and "
+            f"the output's first frame is {times[0]:.2f} s into the video (the video_time and "
+            "video_frame columns of joints.csv and forces.csv say where each frame is)")
 
 
 def camera_message(kind: str | None) -> str | None:
@@ -375,7 +384,8 @@ def warning_lines(found: dict, fps: float, slow_motion: float = 1.0) -> list[str
     """The warnings of a reconstruction's meta ``diagnostics`` (as the pipeline stores them),
     for a result at `fps` from footage played `slow_motion` times slower than real time."""
     lines = [rate_message(fps),
-             trimmed_message(found.get("trimmed"), found.get("observed_frames", 0), fps),
+             trimmed_message(found.get("trimmed"), found.get("observed_frames", 0), fps,
+                             found.get("trimmed_times")),
              camera_message(found.get("camera_motion")),
              unsure_message(found.get("unsure_detections", [])),
              jumps_message(found.get("person_jumps", []), fps,

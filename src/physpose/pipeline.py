@@ -208,8 +208,10 @@ def _screen_observations(obs: Observations, slow_motion: float
     observed_frames = obs.num_frames
     unsure = unsure_times(obs, slow_motion)
     _warn(diagnostics.unsure_message(unsure))
+    untrimmed = obs
     obs, trimmed = trim_unseen_ends(obs)
-    _warn(diagnostics.trimmed_message(trimmed, observed_frames, obs.fps))
+    trimmed_times = None if trimmed is None else footage_times(untrimmed, trimmed, slow_motion)
+    _warn(diagnostics.trimmed_message(trimmed, observed_frames, obs.fps, trimmed_times))
     _warn(diagnostics.camera_message(obs.camera_motion))
     jumps = diagnostics.person_jumps(obs.keypoints2d, obs.detected, obs.fps)
     jump_times = footage_times(obs, jumps, slow_motion)
@@ -219,7 +221,8 @@ def _screen_observations(obs: Observations, slow_motion: float
     _warn(diagnostics.hidden_feet_message(hidden_feet))
     stride = diagnostics.stride_period(keypoints, obs.valid, obs.fps)
     _warn(diagnostics.slow_stride_message(stride, slow_motion))
-    return obs, {"trimmed": trimmed, "observed_frames": observed_frames,
+    return obs, {"trimmed": trimmed, "trimmed_times": trimmed_times,
+                 "observed_frames": observed_frames,
                  "camera_motion": obs.camera_motion, "unsure_detections": unsure,
                  "person_jumps": jumps, "person_jump_times": jump_times,
                  "hidden_feet": hidden_feet, "stride_period": stride}

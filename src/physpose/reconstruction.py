@@ -121,6 +121,31 @@ class Reconstruction:
         return float(self.meta.get("slow_motion") or 1.0)
 
     @property
+    def video_times(self) -> np.ndarray | None:
+        """(T,) seconds into the footage (what --start/--end take) of each frame, from
+        meta["timestamps"] (the observations' clock) times `slow_motion`; None for results
+        written before physpose recorded them (stop 74)."""
+        stamps = self.meta.get("timestamps")
+        if stamps is None or len(stamps) != self.num_frames:
+            return None
+        return np.asarray(stamps, dtype=float) * self.slow_motion
+
+    @property
+    def video_frames(self) -> np.ndarray | None:
+        """(T,) index of each frame in the source video (meta["frame_indices"]), or None."""
+        frames = self.meta.get("frame_indices")
+        if frames is None or len(frames) != self.num_frames:
+            return None
+        return np.asarray(frames, dtype=np.int64)
+
+    def footage_seconds(self, frames) -> np.ndarray:
+        """Seconds into the footage of the given frames (what messages give); seconds from
+        the first frame where the result has no `video_times`."""
+        frames = np.asarray(frames)
+        times = self.video_times
+        return frames / self.fps if times is None else times[frames]
+
+    @property
     def restarts(self) -> list[int]:
         """Frames at which the physics motion restarts from the kinematic estimate (it jumps
         there), from meta["dynamics"]; empty without physics or restarts."""

@@ -26,7 +26,7 @@ from physpose.outputs import DEFAULT_FORMATS, METRICS_FILE, metrics_table, write
 from physpose.paths import check_output_folder
 from physpose.pipeline import CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig
 from physpose.reconstruction import Reconstruction
-from physpose.report.data import forces_summary, slow_motion_note
+from physpose.report.data import forces_summary, slow_motion_note, video_span
 from physpose.scene import SceneConfig, parse_obstacle, trampoline
 
 _OUTPUT_NAMES = {"metrics": "metrics", "report": "report (open in a browser)",
@@ -357,6 +357,10 @@ def print_summary(recon: Reconstruction, out: Path, written: dict[str, Path],
     motions = "physics and kinematic motion" if recon.has_physics else "kinematic motion only"
     print(f"\n{recon.num_frames} frames at {recon.fps:g} fps ({recon.num_frames / recon.fps:.2f}"
           f" s), {motions}")
+    span = video_span(recon)
+    if span:
+        print(f"they are {span} into the video; the times below count from the first of them "
+              "unless they say 'into the video'")
     if recon.slow_motion != 1.0:
         print(slow_motion_note(recon))
     undetected = undetected_line(recon)

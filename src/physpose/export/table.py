@@ -14,15 +14,27 @@ from physpose.reconstruction import GRF_PARTS, Reconstruction
 from physpose.render.result import joints_of
 from physpose.skeleton import DOF_NAMES
 
-CSV_COLUMNS = ("frame", "time", "motion", "joint", "x", "y", "z")
+# video_frame, video_time: the frame in the source video and seconds into it (what --start and
+# --end take); last, so tables read by column number before they came keep their columns.
+CSV_COLUMNS = ("frame", "time", "motion", "joint", "x", "y", "z", "video_frame", "video_time")
 _DECIMALS = 6  # metres: micrometre resolution
 
 
+def _video_cells(rec: Reconstruction) -> list[tuple[str, str]]:
+    """Per frame, the source video's frame and seconds into the footage as CSV cells (empty
+    where the result does not record them)."""
+    frames, times = rec.video_frames, rec.video_times
+    return [("" if frames is None else str(int(frames[t])),
+             "" if times is None else f"{times[t]:.6f}") for t in range(rec.num_frames)]
+
+
 def write_csv(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) -> Path:
-    """Write frame, time (s), motion, joint, x, y, z (m, world z up) for each motion; returns path."""
+    """Write frame, time (s from the first frame), motion, joint, x, y, z (m, world z up),
+    video_frame, video_time (s into the footage) for each motion; returns path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     times = np.arange(rec.num_frames) / rec.fps
+    video = _video_cells(rec)
     with path.open("w", newline="") as f:
         out = csv.writer(f)
         out.writerow(CSV_COLUMNS)
@@ -31,18 +43,22 @@ def write_csv(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) -
             for t in range(rec.num_frames):
                 for j, name in enumerate(rec.joint_names):
                     x, y, z = (f"{v:.{_DECIMALS}f}" for v in joints[t, j])
-                    out.writerow((t, f"{times[t]:.6f}", motion, name, x, y, z))
+                    out.writerow((t, f"{times[t]:.6f}", motion, name, x, y, z, *video[t]))
     return path
 
 
 def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) -> Path:
-    """Write {fps, units, axes, joint_names, time, motions: {name: (T, J, 3) nested lists}}."""
+    """Write {fps, units, axes, joint_names, time, video_frames, video_times, motions: {name:
+    (T, J, 3) nested lists}}; video_frames and video_times null where not recorded."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    frames, times = rec.video_frames, rec.video_times
     doc = {
         "fps": rec.fps, "units": "m", "axes": "world: z up, ground plane z = 0",
         "joint_names": list(rec.joint_names),
         "time": np.round(np.arange(rec.num_frames) / rec.fps, 6).tolist(),
+        "video_frames": None if frames is None else frames.tolist(),
+        "video_times": None if times is None else np.round(times, 6).tolist(),
         "motions": {m: np.round(joints_of(rec, m), _DECIMALS).tolist() for m in motions},
     }
     path.write_text(strict_json(doc, separators=(",", ":")))  # a lost joint as null
@@ -51,10 +67,12 @@ def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) 
 
 def forces_columns() -> tuple[str, ...]:
     """Columns of the forces table: frame, time (s), the force on each of GRF_PARTS (N, world
-    axes), the centre of pressure under each foot (m), the torque across each hinge (N m)."""
+    axes), the centre of pressure under each foot (m), the torque across each hinge (N m),
+    video_frame and video_time (as in CSV_COLUMNS)."""
     grf = [f"{part}_f{axis}_n" for part in GRF_PARTS for axis in "xyz"]
     cop = [f"{side}_cop_{axis}_m" for side in ("l", "r") for axis in "xyz"]
-    return ("frame", "time", *grf, *cop, *(f"{name}_torque_nm" for name in DOF_NAMES))
+    return ("frame", "time", *grf, *cop, *(f"{name}_torque_nm" for name in DOF_NAMES),
+            "video_frame", "video_time")
 
 
 def write_forces_csv(rec: Reconstruction, path: str | Path) -> Path:
@@ -71,10 +89,12 @@ def write_forces_csv(rec: Reconstruction, path: str | Path) -> Path:
                              rec.cop_physics.reshape(rec.num_frames, -1),
                              rec.torques_physics], axis=1)
     times = np.arange(rec.num_frames) / rec.fps
+    video = _video_cells(rec)
     with path.open("w", newline="") as f:
         out = csv.writer(f)
         out.writerow(forces_columns())
         for t, row in enumerate(values):
             out.writerow((t, f"{times[t]:.6f}",
-                          *(f"{v:.{_DECIMALS}f}" if np.isfinite(v) else "" for v in row)))
+                          *(f"{v:.{_DECIMALS}f}" if np.isfinite(v) else "" for v in row),
+                          *video[t]))
     return path

@@ -214,6 +214,16 @@ def slow_motion_note(rec: Reconstruction) -> str:
             "times, speeds and forces here are on the real clock")
 
 
+def video_span(rec: Reconstruction) -> str | None:
+    """Where the result lies in its video ("0.40-1.56 s (frames 24-94)"), or None where the
+    result does not record it. Other times of a result count from its first frame."""
+    times, frames = rec.video_times, rec.video_frames
+    if times is None:
+        return None
+    span = f"{times[0]:.2f}-{times[-1]:.2f} s"
+    return span if frames is None else f"{span} (frames {frames[0]}-{frames[-1]})"
+
+
 def summary_rows(rec: Reconstruction, folder: Path) -> list[tuple[str, str]]:
     """Facts about the result shown above the metrics."""
     rows = [("result", str(folder)), ("frames", str(rec.num_frames)),
@@ -225,6 +235,9 @@ def summary_rows(rec: Reconstruction, folder: Path) -> list[tuple[str, str]]:
     source = rec.meta.get("source")
     if source:
         rows.insert(1, ("video", str(source)))
+    span = video_span(rec)
+    if span:
+        rows.insert(2 if source else 1, ("in the video", span))
     runs = rec.undetected_runs
     if runs:
         rows.append(("frames without a detection",
