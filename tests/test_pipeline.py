@@ -105,7 +105,7 @@ def test_frames_before_and_after_the_person_is_in_view_are_left_out():
     # Seconds into the video, what --start/--end take (here the clip began 2 s in).
     line = trimmed_message(trimmed, t, obs.fps, [2.0 + 4 / obs.fps, 2.0 + (t - 4) / obs.fps])
     assert f"not seen before {2 + 4 / obs.fps:.2f} s or after {2 + (t - 4) / obs.fps:.2f} s " \
-           "into the video" in line and f"first frame is {2 + 4 / obs.fps:.2f} s" in line
+           "into the video" in line and f"frames 4-{t - 4} of the {t} analysed" in line
     # A clip seen throughout, or one seen in fewer than 3 frames, is left whole.
     assert trim_unseen_ends(obs) == (obs, None)
     unseen[:-2] = True

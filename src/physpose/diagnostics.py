@@ -300,9 +300,9 @@ def trimmed_message(trimmed: list[int] | None, total: int, fps: float,
     parts = [f"before {times[0]:.2f} s" if first > 0 else "",
              f"after {times[1]:.2f} s" if last < total - 1 else ""]
     return (f"input: the person is not seen {' or '.join(p for p in parts if p)} into the "
-            f"video: only frames {first}-{last} of the {total} analysed are reconstructed, and "
-            f"the output's first frame is {times[0]:.2f} s into the video (the video_time and "
-            "video_frame columns of joints.csv and forces.csv say where each frame is)")
+            f"video: only frames {first}-{last} of the {total} analysed are reconstructed (the "
+            "video_frame and video_time columns of joints.csv and forces.csv say where each "
+            "frame is)")
 
 
 def camera_message(kind: str | None) -> str | None:
