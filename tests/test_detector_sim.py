@@ -22,6 +22,7 @@ from physpose.joints import (
 )
 from physpose.metrics import project
 from physpose.mocap import MocapClip
+from physpose.pinhole import ray_frame
 
 NOISELESS = DetectorSimConfig.noiseless(distance=4.0)
 
@@ -115,8 +116,17 @@ def test_noiseless_simulation_is_the_projection_of_the_truth():
     R = sim.camera_T_world2cam[:3, :3]
     hips = 0.5 * (sim.landmarks[:, LANDMARK_INDEX["left_hip"]]
                   + sim.landmarks[:, LANDMARK_INDEX["right_hip"]])
-    assert obs.world_landmarks == pytest.approx((sim.landmarks - hips[:, None]) @ R.T)
+    centred = (sim.landmarks - hips[:, None]) @ R.T                          # camera axes
+    # MediaPipe's frame: the camera's turned so that z runs along the ray through the hips.
+    hips_cam = hips @ R.T + sim.camera_T_world2cam[:3, 3]
+    cam_from_ray = ray_frame(hips_cam / np.linalg.norm(hips_cam, axis=-1, keepdims=True))
+    assert obs.world_landmarks == pytest.approx(np.einsum("tji,tkj->tki", cam_from_ray,
+                                                          centred))       # R^T x
     assert obs.world_landmarks[:, LANDMARK_INDEX["nose"], 1].mean() < -0.5   # head up = -y
+    assert (cam_from_ray @ [0, 0, 1]) == pytest.approx(hips_cam / np.linalg.norm(
+        hips_cam, axis=-1, keepdims=True))
+    camera_axes = simulate_detections(clip, dataclasses.replace(NOISELESS, ray_aligned_world=False))
+    assert camera_axes.observations.world_landmarks == pytest.approx(centred)
     assert obs.fps == 25.0 and obs.image_size == (1920, 1080) and obs.camera_K is None
     assert obs.timestamps == pytest.approx(np.arange(50) / 25.0)
 

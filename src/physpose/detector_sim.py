@@ -4,8 +4,9 @@ A static virtual pinhole camera looks at the subject's mean position; MediaPipe'
 are synthesised from the ground-truth skeleton (`synthesize_landmarks`), projected to pixels with
 noise in proportion to the person's size in the image, given confidences that drop for far-side
 and torso-occluded landmarks, and corrupted by occasional outliers and left/right swaps (legs,
-arms or the whole body); hip-centred world landmarks in camera axes get noise that is larger
-along the viewing direction, and per clip a scale error, a depth compression and a lean towards
+arms or the whole body); hip-centred world landmarks, in the frame of the viewing ray through
+the hips (as MediaPipe's are, to within what the multi-view reference shows), get noise that is
+larger along that ray, and per clip a scale error, a depth compression and a lean towards
 or away from the camera. The draws depend on the seed and the clip's name, so two clips of
 the same length get their own noise (before stop 69 they shared one draw). Same config, seed
 and clip -> bit-identical output.
@@ -28,6 +29,7 @@ from physpose.metrics import project, transform_points
 from physpose.mocap.common import MocapClip, body_height
 from physpose.mocap.rotations import axis_rotation
 from physpose.observations import Observations
+from physpose.pinhole import ray_frame
 
 # --- Default noise model -------------------------------------------------------------------
 # Measured on real MediaPipe (docs/mediapipe_error.md: the pose2sim demo, 4 views x 50 frames,
@@ -44,7 +46,7 @@ from physpose.observations import Observations
 # simulator's robust total comes out at 1.75 % (measured as in docs/mediapipe_error.md).
 SIGMA_2D_WHITE = 0.004         # x person size, frame-to-frame part
 SIGMA_2D_DRIFT = 0.0125        # x person size, slowly varying part
-# 3d world landmarks (hip-centred, camera axes). Measured, good views (cam01/03/04): 33-landmark
+# 3d world landmarks (hip-centred). Measured in camera axes, good views (cam01/03/04): 33-landmark
 # mean error 125-178 mm (median 90-157), MPJPE 102-130 mm / MPJPE-PA 68-84 mm on the 21 joints,
 # RMS per axis ~42 / 52 / 161 mm (x / y / z), scale (RMS radius ratio) 0.93-0.96, depth scale
 # 0.51-0.75 (pooled 0.61), depth bias -40..+112 mm (a forward/backward lean). Simulated with
@@ -132,6 +134,11 @@ class DetectorSimConfig:
     far_side_drop: float = FAR_SIDE_DROP     # confidence model: see the constants above
     occluded_drop: float = OCCLUDED_DROP
     known_intrinsics: bool = False  # put K into the Observations (a calibrated camera)
+    # World landmarks in the frame of the ray through the hips, as MediaPipe gives them: on
+    # the four pose2sim views they are 6-12 mm nearer the reference rotated from that frame
+    # than taken in camera axes (docs/mediapipe_error.md, Frame of the world landmarks). False:
+    # camera axes, as the simulator had them until stop 74.
+    ray_aligned_world: bool = True
     seed: int = 0
 
     @classmethod
@@ -156,7 +163,8 @@ class SimulatedCapture:
     joints: np.ndarray               # (T, 21, 3) ground-truth joints, world, m
     landmarks: np.ndarray            # (T, 33, 3) ground-truth landmarks, world, m
     landmarks2d: np.ndarray          # (T, 33, 2) their noise-free projections, px
-    world_landmarks: np.ndarray      # (T, 33, 3) noise-free hip-centred landmarks, camera axes, m
+    world_landmarks: np.ndarray      # (T, 33, 3) noise-free hip-centred landmarks, m, in the
+                                     # ray frame (camera axes without ray_aligned_world)
     outliers: np.ndarray             # (T, 33) bool, landmark replaced by an outlier
     swapped: np.ndarray              # (T, 33) bool, landmark exchanged with its left/right twin
 
@@ -325,10 +333,13 @@ def simulate_detections(clip: MocapClip, cfg: DetectorSimConfig = DetectorSimCon
     conf = (_confidence_base()[None] - cfg.far_side_drop * far - cfg.occluded_drop * occluded
             + CONFIDENCE_JITTER * rng.standard_normal((t, NUM_LANDMARKS)))
 
-    # World landmarks: hip-centred, camera axes; per clip a lean, a scale and a depth
-    # compression; noise larger along the viewing direction (camera z).
+    # World landmarks: hip-centred, in the frame of the ray through the hips; per clip a lean,
+    # a scale and a depth compression; noise larger along the viewing direction (its z).
     hips = 0.5 * (lm_cam[:, LANDMARK_INDEX["left_hip"]] + lm_cam[:, LANDMARK_INDEX["right_hip"]])
     wl_true = lm_cam - hips[:, None]
+    if cfg.ray_aligned_world:
+        ray = hips / np.linalg.norm(hips, axis=-1, keepdims=True)
+        wl_true = np.einsum("tji,tkj->tki", ray_frame(ray), wl_true)     # R^T x, per frame
     scale = cfg.scale_bias_mean + cfg.scale_bias_sigma * rng.standard_normal()
     depth_scale = cfg.depth_scale_mean + cfg.depth_scale_sigma * rng.standard_normal()
     lean = axis_rotation("x", np.deg2rad(cfg.lean_bias_sigma_deg) * rng.standard_normal())

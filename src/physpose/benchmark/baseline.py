@@ -1,6 +1,8 @@
 """The `baseline` variant: the detector's own 3d output, placed in the scene, scored as it is.
 
-MediaPipe's world landmarks are hip-centred and metric in camera axes. Per frame the root
+MediaPipe's world landmarks are hip-centred and metric, in the frame of the viewing ray through
+the hips (docs/mediapipe_error.md, Frame of the world landmarks); they are rotated into camera
+axes by that ray, found from the detected hips, as the kinematic fit does. Per frame the root
 translation t that best re-projects them onto the 2d detections is solved in closed form
 (confidence-weighted linear least squares, re-weighted by depth so the residual approximates
 pixels). The world frame then comes from the known camera, else from a level-camera guess:
@@ -18,6 +20,7 @@ from physpose.benchmark.variants import VariantContext, register_variant
 from physpose.errors import PhysposeError
 from physpose.joints import JOINT_NAMES, LANDMARK_INDEX, joints_from_landmarks
 from physpose.observations import Observations
+from physpose.pinhole import hip_ray_frames
 from physpose.reconstruction import Reconstruction
 
 _FOOT = [LANDMARK_INDEX[n] for n in ("left_heel", "right_heel", "left_foot_index",
@@ -34,6 +37,7 @@ class BaselineConfig:
     min_confidence: float = 0.2     # landmarks below this confidence do not place the root
     reweight_iterations: int = 3    # depth re-weightings of the linear translation solve
     ground_percentile: float = 10.0  # % of frames whose lowest foot landmark is below the ground
+    ray_aligned_world: bool = True  # False: the world landmarks taken in camera axes (until stop 74)
 
 
 def guess_intrinsics(image_size: tuple[int, int]) -> np.ndarray:
@@ -94,14 +98,18 @@ def place_landmarks(obs: Observations, K: np.ndarray, cfg: BaselineConfig) -> np
         raise PhysposeError("the baseline needs MediaPipe world landmarks", path=obs.source,
                             remedy="use observations from `physpose observe` or a keypoints "
                                    "file with world_landmarks")
-    t, ok = solve_root_translation(obs.world_landmarks, obs.keypoints2d, K, cfg)
+    world = np.array(obs.world_landmarks, dtype=float)
+    if cfg.ray_aligned_world:
+        kp = np.asarray(obs.keypoints2d, dtype=float)
+        weight = np.where(kp[..., 2] >= cfg.min_confidence, kp[..., 2], 0.0)
+        world = np.einsum("tij,tkj->tki", hip_ray_frames(kp[..., :2], weight, K), world)
+    t, ok = solve_root_translation(world, obs.keypoints2d, K, cfg)
     ok &= obs.valid
     if not ok.any():
         raise PhysposeError("no frame has enough confident landmarks to place the person",
                             path=obs.source, remedy="check the detections")
     frames = np.arange(obs.num_frames)
     good = np.flatnonzero(ok)
-    world = np.array(obs.world_landmarks, dtype=float)
     for d in range(3):  # frames without evidence take interpolated translations and poses
         t[:, d] = np.interp(frames, good, t[good, d])
     nearest = good[np.clip(np.searchsorted(good, frames), 0, len(good) - 1)]

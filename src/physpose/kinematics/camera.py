@@ -15,7 +15,9 @@ import numpy as np
 
 from physpose.errors import PhysposeError
 from physpose.metrics import camera_height
-from physpose.pinhole import focal_from_fov, intrinsics  # noqa: F401 (the fit's camera)
+# The fit's camera: pinhole.py's helpers, re-exported.
+from physpose.pinhole import (focal_from_fov, intrinsics, ray_frame, rays,  # noqa: F401
+                              rotation_to)
 
 UP_LEVEL = np.array([0.0, -1.0, 0.0])  # the up direction of a level camera, camera axes
 
@@ -45,24 +47,6 @@ def project(K, points):
     z = xp.maximum(z, 1e-3)
     uv = points[..., :2] / z
     return uv * xp.stack([K[0, 0], K[1, 1]]) + xp.stack([K[0, 2], K[1, 2]])
-
-
-def rays(K: np.ndarray, pixels: np.ndarray) -> np.ndarray:
-    """Unit viewing directions (camera axes) of pixels (..., 2) -> (..., 3)."""
-    xy = (np.asarray(pixels, dtype=float) - K[:2, 2]) / np.diag(K)[:2]
-    d = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], axis=-1)
-    return d / np.linalg.norm(d, axis=-1, keepdims=True)
-
-
-def rotation_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The smallest rotations taking unit vectors a (..., 3) to b (..., 3): (..., 3, 3)."""
-    a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
-    v = np.cross(a, b)
-    c = np.sum(a * b, axis=-1)[..., None, None]
-    vx = np.zeros(v.shape[:-1] + (3, 3))
-    vx[..., 0, 1], vx[..., 0, 2], vx[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    vx = vx - np.swapaxes(vx, -1, -2)
-    return np.eye(3) + vx + vx @ vx / np.maximum(1.0 + c, 1e-9)
 
 
 def world_from_plane(normal: np.ndarray, offset: float, origin_cam: np.ndarray) -> np.ndarray:

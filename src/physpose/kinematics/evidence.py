@@ -9,12 +9,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from physpose.errors import PhysposeError
-from physpose.joints import LANDMARK_INDEX
-from physpose.kinematics.camera import rays, rotation_to
 from physpose.kinematics.losses import Data
 from physpose.observations import Observations
+from physpose.pinhole import hip_ray_frames
 
-_HIPS = [LANDMARK_INDEX["left_hip"], LANDMARK_INDEX["right_hip"]]
 _MIN_LANDMARKS = 8  # a frame with fewer confident landmarks carries no evidence
 
 
@@ -68,11 +66,7 @@ def gather_evidence(obs: Observations, K: np.ndarray, min_confidence: float,
                             remedy="check that the person is visible (see the observe overlay)")
     uv = kp[..., :2]
     if ray_aligned:
-        hip_conf = conf[:, _HIPS].sum(axis=1, keepdims=True)
-        hip = (uv[:, _HIPS] * conf[:, _HIPS, None]).sum(1) / np.maximum(hip_conf, 1e-9)
-        mean = (uv * conf[..., None]).sum(1) / np.maximum(conf.sum(1, keepdims=True), 1e-9)
-        centre = np.where(hip_conf > 0, hip, mean)
-        R_ray = rotation_to(np.array([0.0, 0.0, 1.0]), rays(K, centre))
+        R_ray = hip_ray_frames(uv, conf, K)
         R_ray[~valid] = np.eye(3)
     else:
         R_ray = np.broadcast_to(np.eye(3), (len(kp), 3, 3)).copy()

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from physpose.fk import angles_from_matrices
 from physpose.joints import LANDMARK_INDEX
-from physpose.kinematics.camera import rotation_to
+from physpose.pinhole import rotation_to
 from physpose.skeleton import (DOF_LIMITS, LANDMARK_SITES, NUM_DOF, PARENTS, SEGMENT_INDEX,
                                landmark_offsets)
 
