@@ -23,6 +23,7 @@ import logging
 import os
 import secrets
 import zipfile
+import zlib
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from pathlib import Path
@@ -36,10 +37,21 @@ from physpose.paths import cache_dir
 CACHE_FORMAT = 1  # bump if the key recipe or the entry layout changes
 _CHUNK = 1 << 20  # bytes read at a time when hashing files
 # What np.load raises for an npz file that is damaged, cut short or not an npz at all.
-UNREADABLE_NPZ = (OSError, ValueError, EOFError, zipfile.BadZipFile)
+# What reading a damaged npz raises (zlib.error: a compressed member cut or overwritten).
+UNREADABLE_NPZ = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error)
 _log = logging.getLogger(__name__)
 # (resolved path, size, mtime_ns) -> sha256 hex, so a file is hashed once per process.
 _digests: dict[tuple[str, int, int], str] = {}
+
+
+def npz_arrays(path: str | Path) -> dict[str, np.ndarray]:
+    """Every array of an npz archive (allow_pickle=False); one of UNREADABLE_NPZ where the file
+    is damaged or holds something else (np.load gives a bare array for a .npy)."""
+    data = np.load(path, allow_pickle=False)
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise ValueError("not an npz archive (it holds a single array)")
+    with data:
+        return {k: data[k] for k in data.files}
 
 
 @contextmanager
@@ -135,8 +147,7 @@ class Cache:
         if not path.is_file():
             return None
         try:
-            with np.load(path, allow_pickle=False) as data:
-                return {k: data[k] for k in data.files}
+            return npz_arrays(path)
         except UNREADABLE_NPZ as exc:
             _log.warning("dropping unreadable cache entry %s (%s)", path, exc)
             path.unlink(missing_ok=True)

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from physpose.cache import UNREADABLE_NPZ, atomic_path
+from physpose.cache import UNREADABLE_NPZ, atomic_path, npz_arrays
 from physpose.errors import PhysposeError, about
 from physpose.joints import LANDMARK_NAMES, NUM_LANDMARKS
 from physpose.observations import CAMERA_MOTIONS, SURE_CONFIDENCE, Observations
@@ -92,8 +92,7 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 def _read_npz(path: Path) -> dict[str, Any]:
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return {k: data[k] for k in data.files}
+        return npz_arrays(path)
     except UNREADABLE_NPZ as exc:
         raise PhysposeError(f"not a readable npz file ({exc})", path=path,
                             remedy="write it with numpy.savez (no object arrays); " + _DOC) from None

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physpose.cache import UNREADABLE_NPZ, atomic_path
+from physpose.cache import UNREADABLE_NPZ, atomic_path, npz_arrays
 from physpose.errors import PhysposeError
 
 
@@ -25,8 +25,7 @@ def write_npz(path: str | Path, arrays: dict[str, np.ndarray]) -> Path:
 def read_npz(path: str | Path, *, what: str, remedy: str) -> dict[str, np.ndarray]:
     """All arrays of an npz file (allow_pickle=False); PhysposeError if it cannot be read."""
     try:
-        with np.load(path, allow_pickle=False) as data:
-            return {k: data[k] for k in data.files}
+        return npz_arrays(path)
     except UNREADABLE_NPZ as exc:
         raise PhysposeError(f"not a readable {what} npz ({exc})", path=path,
                             remedy=remedy) from None

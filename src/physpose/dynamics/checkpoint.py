@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physpose.cache import UNREADABLE_NPZ, atomic_path, stage_key
+from physpose.cache import UNREADABLE_NPZ, atomic_path, npz_arrays, stage_key
 from physpose.paths import cache_dir
 
 _log = logging.getLogger(__name__)
@@ -63,9 +63,8 @@ def load_window(folder: Path, index: int) -> tuple[dict[str, np.ndarray], dict] 
     if not path.is_file():
         return None
     try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files if k != "record_json"}
-            record = json.loads(str(data["record_json"]))
+        arrays = npz_arrays(path)
+        record = json.loads(str(arrays.pop("record_json")))
     except (*UNREADABLE_NPZ, KeyError) as exc:  # KeyError: no record inside
         _log.warning("%s: unreadable checkpoint (%s); this window is optimised again", path, exc)
         path.unlink(missing_ok=True)
