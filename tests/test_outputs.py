@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -80,6 +81,30 @@ def test_default_exports_include_the_forces_of_a_physics_result(tmp_path):
     written = write_outputs(folder, report=False, overlay=False)
     assert set(written) == {"metrics", *DEFAULT_FORMATS} and "forces" in DEFAULT_FORMATS
     assert written["forces"] == folder / "forces.csv"
+
+
+def test_a_rerun_into_the_folder_leaves_no_outputs_of_the_earlier_run(tmp_path, caplog):
+    """A second reconstruction into a folder, asked for fewer outputs, had left the first
+    run's joints.csv (4.5 cm off the new result) and overlay beside the new
+    reconstruction.npz, unmentioned; and a run killed while writing had left its temporary
+    file for good (a helper's findings)."""
+    import subprocess
+    import sys
+
+    folder = save_result(tmp_path, num_frames=5)
+    write_outputs(folder, formats=("bvh", "csv"), report=False, overlay=False)
+    assert (folder / "joints.csv").is_file() and (folder / "motion.bvh").is_file()
+    gone = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    killed = folder / f".overlay.{int(gone.stdout)}.0123abcd.tmp.mp4"   # its writer is gone
+    live = folder / f".overlay.{os.getpid()}.0123abcd.tmp.mp4"          # this process's
+    killed.write_bytes(b"half a video")
+    live.write_bytes(b"being written")
+    written = write_outputs(folder, formats=("bvh",), report=False, overlay=False)
+    assert set(written) == {"metrics", "bvh"} and (folder / "motion.bvh").is_file()
+    assert not (folder / "joints.csv").exists() and not killed.exists() and live.exists()
+    assert "removed joints.csv, written there by an earlier run" in caplog.text
+    assert "motion.bvh" not in caplog.text  # written again: nothing to say
 
 
 def test_unknown_format_is_refused_before_writing(tmp_path):

@@ -21,6 +21,7 @@ import hashlib
 import json
 import logging
 import os
+import re
 import secrets
 import zipfile
 import zlib
@@ -68,6 +69,34 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def leftover_temp_files(folder: str | Path) -> list[Path]:
+    """atomic_path's temporary files in `folder` whose writing process is gone (a run killed
+    while it wrote them). Where processes cannot be asked about (not POSIX), none."""
+    if os.name != "posix":
+        return []
+    found = []
+    for path in Path(folder).glob(".*.tmp*"):
+        match = _TEMP_NAME.fullmatch(path.name)
+        if match and not _running(int(match.group(1))):
+            found.append(path)
+    return found
+
+
+_TEMP_NAME = re.compile(r"\..+\.(\d+)\.[0-9a-f]{8}\.tmp(\.[^.]*)?")
+
+
+def _running(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)  # POSIX: asks, sends nothing
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True  # someone else's process
+    return True
 
 
 def file_digest(path: str | Path) -> str:

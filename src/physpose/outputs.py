@@ -12,19 +12,23 @@ PNG frame and the exports, all into the result folder.
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
 
 from physpose import video as videolib
-from physpose.cache import atomic_path
+from physpose.cache import atomic_path, leftover_temp_files
 from physpose.errors import PhysposeError
 from physpose.export import DEFAULT_NAMES, FORMATS, export
 from physpose.json_text import strict_json
 from physpose.metrics import CONTACT_PRESETS, evaluate, project
 from physpose.reconstruction import Reconstruction
+from physpose.render.overlay import DEFAULT_NAME as OVERLAY_NAME
 from physpose.render.result import available_motions, load_result
+from physpose.report import DEFAULT_NAME as REPORT_NAME
 
+_log = logging.getLogger(__name__)
 METRICS_FILE = "metrics.json"
 OVERLAY_PNG = "overlay.png"
 # Metric keys of `evaluate` in the order and with the labels of the summary table.
@@ -110,13 +114,19 @@ def write_outputs(result_dir: str | Path, *, video: str | Path | None = None,
     video: the source video for the overlay (default: the one recorded in the result).
     formats: any of physpose.export.FORMATS; 'forces' is skipped for a result without
     simulated forces (a kinematic fit). Returns {name: path} of what was written, names
-    'metrics', 'report', 'overlay', 'overlay_png' and the formats.
+    'metrics', 'report', 'overlay', 'overlay_png' and the formats. The folder's
+    reconstruction.npz has just been written: these outputs of an earlier run, made from
+    another one, are removed first (logged where this call does not write them again), and
+    so are temporary files a killed run left.
     """
     unknown = [f for f in formats if f not in FORMATS]
     if unknown:
         raise PhysposeError(f"unknown export format(s) {', '.join(map(repr, unknown))}",
                             remedy=f"choose from {', '.join(FORMATS)}")
     rec, folder = load_result(result_dir)
+    _clear_earlier_outputs(folder, {METRICS_FILE, *(DEFAULT_NAMES[f] for f in formats)}
+                           | ({REPORT_NAME} if report else set())
+                           | ({OVERLAY_NAME, OVERLAY_PNG} if overlay else set()))
     video = None if video is None else Path(video)
     metrics = {m: motion_metrics(rec, m) for m in available_motions(rec)}
     written: dict[str, Path] = {}
@@ -139,6 +149,21 @@ def write_outputs(result_dir: str | Path, *, video: str | Path | None = None,
             continue
         written[fmt] = export(folder, fmt, folder / DEFAULT_NAMES[fmt])
     return written
+
+
+def _clear_earlier_outputs(folder: Path, rewritten: set[str]) -> None:
+    """Remove what write_outputs writes, as an earlier run left it in `folder`, and temporary
+    files of killed runs; say which files go for good (not in `rewritten`)."""
+    names = {METRICS_FILE, REPORT_NAME, OVERLAY_NAME, OVERLAY_PNG, *DEFAULT_NAMES.values()}
+    gone = sorted(n for n in names - rewritten if (folder / n).is_file())
+    for name in names:
+        if (folder / name).is_file():
+            (folder / name).unlink()
+    for temp in leftover_temp_files(folder):
+        temp.unlink(missing_ok=True)
+    if gone:
+        _log.warning("%s: removed %s, written there by an earlier run from another "
+                     "reconstruction (not asked for this time)", folder, ", ".join(gone))
 
 
 def _labelled(metrics: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
