@@ -66,3 +66,28 @@ def test_an_output_path_the_file_system_refuses_is_an_error_not_a_traceback(tmp_
     err = capsys.readouterr().err
     assert f"{blocker}:" in err and "check that the path exists" in err
     assert "Traceback" not in err
+
+
+def _raising(exc):
+    def run(args):
+        raise exc
+    return run
+
+
+def test_ctrl_c_and_a_full_disk_end_in_a_message_with_what_to_do(monkeypatch, tmp_path, capsys):
+    """Any command: an interrupt prints on a line of its own (a progress bar may hold the
+    cursor) and says how to resume; a full disk says to free space, not to check the path."""
+    import errno
+
+    import physpose.cli.body as body_cli
+
+    monkeypatch.setattr(body_cli, "_run", _raising(KeyboardInterrupt()))
+    assert main(["body", "--height", "1.7", "--out", str(tmp_path / "b.xml")]) == 130
+    err = capsys.readouterr().err
+    assert err.startswith("\nphyspose body: interrupted. Run the same command again to resume")
+    full = OSError(errno.ENOSPC, "No space left on device", str(tmp_path / "w.npz"))
+    monkeypatch.setattr(body_cli, "_run", _raising(full))
+    assert main(["body", "--height", "1.7", "--out", str(tmp_path / "b.xml")]) == 2
+    err = capsys.readouterr().err
+    assert f"{tmp_path / 'w.npz'}: No space left on device. free some space there" in err
+    assert "check that the path exists" not in err

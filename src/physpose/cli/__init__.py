@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import re
 import sys
@@ -64,13 +65,17 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     except OSError as err:  # the file system refused: a path that is missing, wrong or locked
         where = f"{err.filename}: " if err.filename else ""
-        print(f"physpose {args.command}: error: {where}{err.strerror or err}. check that the "
-              "path exists, is a folder or a file as the option asks, and that you may read "
-              "and write there", file=sys.stderr)
+        remedy = ("free some space there and run the same command again (work finished so "
+                  "far is kept)" if err.errno in (errno.ENOSPC, errno.EDQUOT) else
+                  "check that the path exists, is a folder or a file as the option asks, and "
+                  "that you may read and write there")
+        print(f"physpose {args.command}: error: {where}{err.strerror or err}. {remedy}",
+              file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"physpose {args.command}: interrupted; finished work is kept (rerun to resume)",
-              file=sys.stderr)
+        # On a line of its own: a progress bar may have the cursor.
+        print(f"\nphyspose {args.command}: interrupted. Run the same command again to resume: "
+              "the stages and physics windows finished so far are kept", file=sys.stderr)
         return 130
 
 

@@ -49,8 +49,10 @@ def save_window(folder: Path, index: int, arrays: dict[str, np.ndarray], record:
                      **{k: np.asarray(v) for k, v in arrays.items()})
     except OSError as exc:
         _log.warning("%s: cannot write this window's checkpoint (%s); the run goes on, but "
-                     "an interruption would start it again. for the benchmark, set "
-                     "PHYSPOSE_CACHE_DIR to a folder you may write to", path, exc.strerror or exc)
+                     "an interruption would optimise this window again. Free space there or "
+                     "allow writing (reconstruct keeps its checkpoints in --out's "
+                     "dynamics_windows, the benchmark under PHYSPOSE_CACHE_DIR)", path,
+                     exc.strerror or exc)
         return None
     return path
 
