@@ -68,6 +68,10 @@ def test_json_writes_a_missing_coordinate_as_null(tmp_path):
                      parse_constant=refuse)
     assert doc["motions"]["kinematic"][2][3] == [None, None, None]
     assert doc["motions"]["kinematic"][2][2] == pytest.approx(joints[2, 2].tolist(), abs=1e-6)
+    # The CSV leaves the cells empty, as forces.csv does (it had written the text "nan").
+    with export(folder, "csv", motion="kinematic").open() as f:
+        row = [r for r in csv.DictReader(f) if r["frame"] == "2"][3]
+    assert (row["x"], row["y"], row["z"]) == ("", "", "")
 
 
 def test_kinematic_only_result_exports_kinematic_rows(tmp_path):

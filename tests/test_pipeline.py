@@ -145,6 +145,10 @@ def test_reconstruct_writes_the_contract(tmp_path):
     assert loaded.body_mjcf and "<mujoco" in loaded.body_mjcf
     assert loaded.landmarks_kinematic.shape == (t, 33, 3)
     assert set(loaded.meta["timings_s"]) == {"observe", "kinematics", "body", "dynamics"}
+    # Where there is no video to ask (keypoints, simulated detections), the image size and
+    # each frame's time come from the observations.
+    assert loaded.meta["image_size"] == list(obs.image_size)
+    np.testing.assert_allclose(loaded.video_times, obs.timestamps, atol=1e-6)
     # A simulated motion is one the body can make: almost no unexplained root force.
     assert loaded.meta["dynamics"]["reference"]["root_residual_median"] < 0.05
     # A clean simulated clip raises none of the input warnings (physpose.diagnostics).

@@ -42,7 +42,8 @@ def write_csv(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) -
             joints = joints_of(rec, motion)
             for t in range(rec.num_frames):
                 for j, name in enumerate(rec.joint_names):
-                    x, y, z = (f"{v:.{_DECIMALS}f}" for v in joints[t, j])
+                    x, y, z = (f"{v:.{_DECIMALS}f}" if np.isfinite(v) else ""
+                               for v in joints[t, j])  # a lost joint: empty, as in forces.csv
                     out.writerow((t, f"{times[t]:.6f}", motion, name, x, y, z, *video[t]))
     return path
 
