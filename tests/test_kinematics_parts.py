@@ -112,6 +112,32 @@ def test_legs_swapped_in_most_frames_are_repaired(walk_evidence):
     assert not states["arms"].any() and not states["trunk"].any()
 
 
+def test_a_labelling_and_its_mirror_image_move_at_the_same_cost(walk_evidence):
+    """Each landmark's motion is weighted by its own confidences: with one side far less
+    confident (seen from the side), exchanging a group's labels in every frame must not change
+    its motion cost (it had, by the confidences' difference times the sides' motions)."""
+    ev = walk_evidence
+    weight = ev.weight.copy()
+    for group in GROUPS.values():
+        weight[:, [LANDMARK_INDEX[f"right_{p}"] for p in group]] *= 0.4
+    ev = type(ev)(**{**ev.__dict__, "weight": weight})
+    for group in GROUPS.values():
+        cost = swaps._motion_costs(ev, group, 25.0)
+        assert np.allclose(cost[:, 0, 0], cost[:, 1, 1]) and cost[:, 0, 0].sum() > 0
+        assert np.allclose(cost[:, 0, 1], cost[:, 1, 0])
+
+
+def test_long_repairs_are_reported(walk_evidence, caplog):
+    rows = np.arange(4, 24)
+    with caplog.at_level("WARNING", logger="physpose.kinematics.swaps"):
+        unswap(_swapped(walk_evidence, rows, GROUPS["legs"]))
+    assert "legs' left/right labels are exchanged" in caplog.text and "4-23" in caplog.text
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="physpose.kinematics.swaps"):
+        unswap(_swapped(walk_evidence, np.arange(11, 15), GROUPS["legs"]))
+    assert not caplog.text
+
+
 def test_whole_body_flips_are_repaired(walk_evidence):
     rows = np.array([8, 9, 10, 11, 12, 20, 21])
     everything = tuple(p for parts in GROUPS.values() for p in parts)

@@ -48,7 +48,7 @@ from physpose.observations import Observations
 from physpose.shape import BodyShape
 from physpose.skeleton import NQ
 
-KINEMATICS_VERSION = 10  # bump when a change alters the result for the same input and config
+KINEMATICS_VERSION = 11  # bump when a change alters the result for the same input and config
 Log = Callable[[str], None]
 
 

@@ -15,7 +15,19 @@ frame's state says which groups are exchanged (2^3 states); the Viterbi path min
   MediaPipe's 3d. This is what decides the legs, whose left and right cross each other in the
   image while walking, and it fixes which limb labelling of the two mirror images is right;
 - a cost per swap event, an event exchanging one limb group or the whole body, so a clear
-  whole-body flip seen on the arms carries the legs and the trunk along.
+  whole-body flip seen on the arms carries the legs and the trunk along;
+- a cost per frame in which a limb's labels are exchanged relative to the trunk's against the
+  detector's (LABEL_COST): the detector labels most frames right, and only this weighs how long
+  a repair lasts. Where nothing else links two labellings of a limb (a whole clip, or frames
+  after the legs overlap in the image and in depth), the attachment alone decided; seen from
+  the side it is weak (the hips' axis lies along the ray, where MediaPipe's depth is flattened
+  and noisiest, and a walk's knees and feet pass close together), and it labelled whole clips
+  the wrong way round (bench_swaps at 75/90/270 degrees: 11/12/8 of 120 runs with the legs
+  wrong in over 10 % of frames; 1/1/0 with this cost).
+Each landmark's motion is weighted by its own confidences under either labelling (before, by
+those of the landmark holding its label as detected: a labelling and its mirror image then
+moved at different costs, by up to 400 units over 4 s where the far side's confidences are
+low, a hidden preference that decided mirror images from the side either way).
 The motion scale shrinks with the frame rate (landmarks move less between frames) down to
 MOTION_SIGMA_MIN, the detector's own frame-to-frame noise, which it reaches at 50 fps. Above,
 where the floor lifts the scale by a factor k, the attachment costs are divided by k^2 like
@@ -34,12 +46,15 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import logging
 import math
 
 import numpy as np
 
 from physpose.joints import LANDMARK_INDEX, LANDMARK_NAMES
 from physpose.kinematics.evidence import Evidence
+
+_log = logging.getLogger(__name__)
 
 GROUPS: dict[str, tuple[str, ...]] = {
     "legs": ("knee", "ankle", "heel", "foot_index"),
@@ -55,6 +70,8 @@ MOTION_SIGMA_MIN = 0.125  # torso lengths: the detector's frame-to-frame noise (
 MOTION_SIGMA_3D = 0.125   # m: the same in MediaPipe's 3d (a torso is about 0.5 m); same floor ratio
 MOTION_CAP = 9.0      # a landmark's (motion / sigma)^2 saturates towards this: c/(1 + c/cap)
 ATTACH_SIGMA = 0.02   # m of excess limb-to-root distance per unit cost
+LABEL_COST = 2.0      # per frame with a limb's labels exchanged relative to the trunk's
+LONG_EXCHANGE = 0.5   # s: a limb exchanged against the detector's labels this long is reported
 STRETCH_GAP = 0.2     # s without evidence that end a stretch (its labels judged on their own)
 
 
@@ -104,12 +121,13 @@ def _moves(x: np.ndarray, ev: Evidence, parts: tuple[str, ...], sigma: float) ->
     left, right = _pairs(parts)
     states = (np.concatenate([x[:, left], x[:, right]], axis=1),     # labels as given
               np.concatenate([x[:, right], x[:, left]], axis=1))     # labels exchanged
-    w = np.concatenate([ev.weight[:, left], ev.weight[:, right]], axis=1)
+    weights = (np.concatenate([ev.weight[:, left], ev.weight[:, right]], axis=1),
+               np.concatenate([ev.weight[:, right], ev.weight[:, left]], axis=1))
     cost = np.zeros((len(x), 2, 2))
     good = np.flatnonzero(ev.valid)
     for last, t in zip(good[:-1], good[1:]):
-        wt = np.minimum(w[t], w[last])
         for i, j in itertools.product(range(2), range(2)):
+            wt = np.minimum(weights[j][t], weights[i][last])   # each landmark's own weights
             d2 = np.sum((states[j][t] - states[i][last]) ** 2, axis=-1) / (sigma * (t - last)) ** 2
             d2 = d2 / (1.0 + d2 / MOTION_CAP)
             cost[t, i, j] = np.sum(wt * d2) / max(wt.sum(), 1e-9) * len(wt)
@@ -161,6 +179,7 @@ def swap_paths(ev: Evidence, groups: tuple[str, ...] = tuple(GROUPS), fps_ref: f
             if name in ATTACH:
                 relative = bits[:, g] ^ bits[:, groups.index("trunk")]
                 emit += _attachment_costs(ev, name)[:, relative]
+                emit += LABEL_COST * ev.valid[:, None] * relative[None, :]
         emit /= _motion_sigma(ev.fps, fps_ref)[1] ** 2
     cost = np.zeros((t_count, n_states))
     cost[0] = emit[0]
@@ -204,10 +223,35 @@ def _exchange(values: np.ndarray, rows: np.ndarray, left: np.ndarray, right: np.
     return out
 
 
+def long_exchanges(ev: Evidence, paths: dict[str, np.ndarray]) -> dict[str, list[np.ndarray]]:
+    """Limb group -> the runs of frames (LONG_EXCHANGE or longer) in which `paths` keep its
+    labels exchanged relative to the trunk's, against the detector's labelling."""
+    if "trunk" not in paths:
+        return {}
+    shortest = max(1, math.ceil(LONG_EXCHANGE * ev.fps - 1e-9))
+    out = {}
+    for name in ATTACH:
+        if name in paths:
+            frames = np.flatnonzero((paths[name] ^ paths["trunk"]) & ev.valid)
+            runs = np.split(frames, np.flatnonzero(np.diff(frames) > 1) + 1)
+            out[name] = [run for run in runs if run.size >= shortest]
+    return out
+
+
 def unswap(ev: Evidence) -> Evidence:
-    """Evidence with the detected limb swaps undone (see the module docstring)."""
+    """Evidence with the detected limb swaps undone (see the module docstring). A limb kept
+    exchanged against the detector's labels for LONG_EXCHANGE or longer is logged: where the
+    detector's swaps are short that is where a wrong repair lies (bench_swaps)."""
     uv, weight, world = ev.uv, ev.weight, ev.world_ray
-    for name, swapped in swap_paths(ev).items():
+    paths = swap_paths(ev)
+    for name, runs in long_exchanges(ev, paths).items():
+        for run in runs:
+            _log.warning("swap repair: the %s' left/right labels are exchanged against the "
+                         "detector's at frames %d-%d of the fit (%.1f s); seen from the side "
+                         "MediaPipe's 3d tells the limbs apart poorly, so check the fit there "
+                         "(the repair is KinematicConfig.fix_swaps)", name, run[0], run[-1],
+                         run.size / ev.fps)
+    for name, swapped in paths.items():
         rows = np.flatnonzero(swapped)
         if rows.size:
             left, right = _pairs(GROUPS[name])
