@@ -232,8 +232,7 @@ def long_exchanges(ev: Evidence, paths: dict[str, np.ndarray]) -> dict[str, list
     out = {}
     for name in ATTACH:
         if name in paths:
-            frames = np.flatnonzero((paths[name] ^ paths["trunk"]) & ev.valid)
-            runs = np.split(frames, np.flatnonzero(np.diff(frames) > 1) + 1)
+            runs = _stretches((paths[name] ^ paths["trunk"]) & ev.valid, 1)
             out[name] = [run for run in runs if run.size >= shortest]
     return out
 
