@@ -37,8 +37,8 @@ from physpose.paths import cache_dir
 
 CACHE_FORMAT = 1  # bump if the key recipe or the entry layout changes
 _CHUNK = 1 << 20  # bytes read at a time when hashing files
-# What np.load raises for an npz file that is damaged, cut short or not an npz at all.
-# What reading a damaged npz raises (zlib.error: a compressed member cut or overwritten).
+# What np.load raises for an npz file that is damaged, cut short or not an npz at all
+# (zlib.error: a compressed member overwritten, found only as its array is read).
 UNREADABLE_NPZ = (OSError, ValueError, EOFError, zipfile.BadZipFile, zlib.error)
 _log = logging.getLogger(__name__)
 # (resolved path, size, mtime_ns) -> sha256 hex, so a file is hashed once per process.
@@ -71,6 +71,10 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         tmp.unlink(missing_ok=True)
 
 
+# atomic_path's temporary names: .<stem>.<pid>.<8 hex>.tmp<suffix>
+_TEMP_NAME = re.compile(r"\..+\.(\d+)\.[0-9a-f]{8}\.tmp(\.[^.]*)?")
+
+
 def leftover_temp_files(folder: str | Path) -> list[Path]:
     """atomic_path's temporary files in `folder` whose writing process is gone (a run killed
     while it wrote them). Where processes cannot be asked about (not POSIX), none."""
@@ -82,9 +86,6 @@ def leftover_temp_files(folder: str | Path) -> list[Path]:
         if match and not _running(int(match.group(1))):
             found.append(path)
     return found
-
-
-_TEMP_NAME = re.compile(r"\..+\.(\d+)\.[0-9a-f]{8}\.tmp(\.[^.]*)?")
 
 
 def _running(pid: int) -> bool:

@@ -138,13 +138,6 @@ class Reconstruction:
             return None
         return np.asarray(frames, dtype=np.int64)
 
-    def footage_seconds(self, frames) -> np.ndarray:
-        """Seconds into the footage of the given frames (what messages give); seconds from
-        the first frame where the result has no `video_times`."""
-        frames = np.asarray(frames)
-        times = self.video_times
-        return frames / self.fps if times is None else times[frames]
-
     @property
     def restarts(self) -> list[int]:
         """Frames at which the physics motion restarts from the kinematic estimate (it jumps
