@@ -11,10 +11,10 @@ from scipy.spatial.transform import Rotation
 
 from physpose.fk import fk_qpos, segment_frames
 from physpose.joints import LANDMARK_INDEX
-from physpose.kinematics.camera import rays, rotation_to
 from physpose.kinematics.surface import place, surface_points
 from physpose.metrics import project, transform_points
 from physpose.observations import Observations
+from physpose.pinhole import rays, rotation_to
 from physpose.shape import BodyShape
 from physpose.skeleton import DOF_NAMES, NQ
 

@@ -15,9 +15,7 @@ import numpy as np
 
 from physpose.errors import PhysposeError
 from physpose.metrics import camera_height
-# The fit's camera: pinhole.py's helpers, re-exported.
-from physpose.pinhole import (focal_from_fov, intrinsics, ray_frame, rays,  # noqa: F401
-                              rotation_to)
+from physpose.pinhole import focal_from_fov, intrinsics  # noqa: F401 (the fit's camera)
 
 UP_LEVEL = np.array([0.0, -1.0, 0.0])  # the up direction of a level camera, camera axes
 
