@@ -205,6 +205,15 @@ def test_detections_left_out_as_torn_are_warned_about_with_their_times():
         diagnostics.unsure_message([0.13])]
 
 
+def test_long_label_exchanges_reach_the_summary():
+    runs = {"legs": [[4, 23], [40, 60]], "arms": [[10, 30]]}
+    line = diagnostics.label_exchange_message(runs, 25.0)
+    assert "the legs' at frames 4-23 (0.16-0.96 s), 40-60 (1.60-2.44 s)" in line
+    assert "the arms' at frames 10-30" in line and "fix_swaps=False" in line
+    assert diagnostics.warning_lines({"label_exchanges": runs}, 25.0) == [line]
+    assert diagnostics.warning_lines({"label_exchanges": None}, 25.0) == []
+
+
 def test_a_camera_found_low_above_or_below_the_floor_is_warned_about():
     """The kinematic fit of a person lying throughout put the camera at -0.37 to +0.03 m above
     its floor in the benchmark's runs (the truth: 1.3 m; docs/kinematics.md, limits)."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -10,10 +11,12 @@ from scipy.spatial.transform import Rotation
 from test_kinematics_fixtures import synthetic_clip
 
 from physpose.cli import main
+from physpose.diagnostics import label_exchange_message
 from physpose.fk import fk
 from physpose.joints import LANDMARK_INDEX
 from physpose.kinematics.config import KinematicConfig
 from physpose.kinematics.evidence import gather_evidence, padded_length, seed_frames
+from physpose.kinematics.fit import fit_kinematics
 from physpose.kinematics.ik import angles_from_rotations, inverse_kinematics, segment_rotations
 from physpose.kinematics.losses import rotvec_matrix
 from physpose.kinematics import swaps
@@ -99,7 +102,8 @@ def test_swaps_are_found_and_undone(walk_evidence):
     assert np.array_equal(np.flatnonzero(states["legs"]), rows)
     assert not states["arms"].any() and not states["trunk"].any()
     assert not any(s.any() for s in swap_paths(ev).values())
-    repaired = unswap(bad)
+    repaired, long_runs = unswap(bad)
+    assert not long_runs
     assert np.allclose(repaired.uv, ev.uv) and np.allclose(repaired.world_ray, ev.world_ray)
 
 
@@ -127,15 +131,35 @@ def test_a_labelling_and_its_mirror_image_move_at_the_same_cost(walk_evidence):
         assert np.allclose(cost[:, 0, 1], cost[:, 1, 0])
 
 
-def test_long_repairs_are_reported(walk_evidence, caplog):
+def test_long_repairs_are_reported(walk_evidence):
+    _, long_runs = unswap(_swapped(walk_evidence, np.arange(4, 24), GROUPS["legs"]))
+    assert long_runs == {"legs": [[4, 23]]}
+    message = label_exchange_message(long_runs, 25.0)
+    assert "the legs' at frames 4-23 (0.16-0.96 s)" in message
+    assert label_exchange_message({}, 25.0) is None and label_exchange_message(None, 25.0) is None
+    _, long_runs = unswap(_swapped(walk_evidence, np.arange(11, 15), GROUPS["legs"]))
+    assert not long_runs
+
+
+def test_a_long_repair_is_kept_with_the_fit_and_told_again_from_the_cache(tmp_path, monkeypatch,
+                                                                          caplog):
+    """The fit records its long label exchanges (the summary lists them) and warns of them
+    whether it was computed or read from the cache (it had warned only when computed)."""
+    monkeypatch.setenv("PHYSPOSE_CACHE_DIR", str(tmp_path))
+    clip = synthetic_clip(frames=30)
+    left = [LANDMARK_INDEX[f"left_{p}"] for p in GROUPS["legs"]]
+    right = [LANDMARK_INDEX[f"right_{p}"] for p in GROUPS["legs"]]
     rows = np.arange(4, 24)
-    with caplog.at_level("WARNING", logger="physpose.kinematics.swaps"):
-        unswap(_swapped(walk_evidence, rows, GROUPS["legs"]))
-    assert "legs' left/right labels are exchanged" in caplog.text and "4-23" in caplog.text
-    caplog.clear()
-    with caplog.at_level("WARNING", logger="physpose.kinematics.swaps"):
-        unswap(_swapped(walk_evidence, np.arange(11, 15), GROUPS["legs"]))
-    assert not caplog.text
+    kp, world = clip.observations.keypoints2d.copy(), clip.observations.world_landmarks.copy()
+    for a in (kp, world):
+        a[np.ix_(rows, left + right)] = a[np.ix_(rows, right + left)]
+    obs = dataclasses.replace(clip.observations, keypoints2d=kp, world_landmarks=world)
+    for _ in range(2):
+        caplog.clear()
+        with caplog.at_level("WARNING", logger="physpose.kinematics.fit"):
+            fit = fit_kinematics(obs, KinematicConfig.preset("S"))
+        assert fit.label_exchanges == {"legs": [[4, 23]]}
+        assert "the legs' at frames 4-23" in caplog.text
 
 
 def test_whole_body_flips_are_repaired(walk_evidence):

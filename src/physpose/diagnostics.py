@@ -21,6 +21,8 @@ somersaults off it, and back), and what the dynamics stage makes of them:
 - `unrecorded_force_runs`: frames whose simulated forces are missing because their windows
   were resumed from checkpoints an earlier physpose wrote without them.
 - `rate_message`: an analysis rate above the rates the kinematic fit was measured at.
+- `label_exchange_message`: where the kinematic fit's swap repair kept a limb's left/right
+  labels exchanged against the detector's for half a second or more (a wrong repair's sign).
 - `low_camera_message`: where the kinematic fit put the camera above the floor it found
   (`metrics.camera_height`). Under
   LOW_CAMERA above it, or below it, the person was most likely low to the floor for the whole
@@ -346,6 +348,21 @@ def seated_message(runs: list[tuple[int, int, float]], seats: tuple, fps: float)
             "with --obstacle box:x,y,z,sx,sy,sz[,yaw_deg] (centre and sizes in world metres)")
 
 
+def label_exchange_message(runs: dict[str, list[list[int]]] | None, fps: float
+                           ) -> str | None:
+    """A warning on the kinematic fit's long label exchanges (`KinematicFit.label_exchanges`:
+    limb group -> [first, last] frames), or None."""
+    if not runs:
+        return None
+    where = "; ".join(f"the {name}' at frames " + ", ".join(_span(a, b, fps) for a, b in spans)
+                      for name, spans in runs.items())
+    return (f"kinematics: the swap repair kept left and right exchanged against the detector's "
+            f"labels for half a second or longer ({where}). Seen from the side MediaPipe's 3d "
+            "tells the limbs apart poorly, so the repair may have chosen the mirror image "
+            "there: check those frames in the overlay (in Python, KinematicConfig(fix_swaps=False) "
+            "turns the repair off)")
+
+
 def low_camera_message(height: float | None) -> str | None:
     """A warning when the kinematic fit put the camera under LOW_CAMERA above its floor."""
     if height is None or not np.isfinite(height) or height >= LOW_CAMERA:
@@ -392,6 +409,7 @@ def warning_lines(found: dict, fps: float, slow_motion: float = 1.0) -> list[str
                            found.get("person_jump_times")),
              hidden_feet_message(found.get("hidden_feet", 0.0)),
              low_camera_message(found.get("camera_height")),
+             label_exchange_message(found.get("label_exchanges"), fps),
              raised_message([tuple(r) for r in found.get("raised", [])], fps,
                             supported=bool(found.get("supports"))),
              seated_message([tuple(r) for r in found.get("seated", [])],

@@ -240,7 +240,8 @@ def _scene_for(kin: KinematicFit, config: PipelineConfig) -> tuple[SceneConfig, 
     seated = supports.seated_runs(kin.joints, kin.fps)
     seats = supports.seat_boxes(kin.joints, seated) if config.auto_support else ()
     _warn(diagnostics.seated_message(seated, seats, kin.fps))
-    found = {"camera_height": camera_height, "raised": [list(r) for r in raised],
+    found = {"camera_height": camera_height, "label_exchanges": kin.label_exchanges,
+             "raised": [list(r) for r in raised],
              "supports": [[*b.center, *b.size] for b in boxes],
              "seated": [list(r) for r in seated], "seats": [b.spec() for b in seats]}
     if not (boxes or seats):

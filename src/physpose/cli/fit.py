@@ -105,7 +105,8 @@ def _run(args: argparse.Namespace) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     recon = reconstruction_of(fit, obs)
     recon = recon.replace(meta={**recon.meta, "slow_motion": args.slow_motion,
-                                "diagnostics": {"camera_height": height_found}})
+                                "diagnostics": {"camera_height": height_found,
+                                                "label_exchanges": fit.label_exchanges}})
     recon.save(args.out / RECONSTRUCTION_FILE)
     resolved = {"stage": "kinematics", "physpose_version": __version__,
                 "input": str(args.input.resolve()), "variant": args.variant,

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import sys
 import time
 from collections.abc import Callable
@@ -49,6 +50,7 @@ from physpose.shape import BodyShape
 from physpose.skeleton import NQ
 
 KINEMATICS_VERSION = 11  # bump when a change alters the result for the same input and config
+_log = logging.getLogger(__name__)
 Log = Callable[[str], None]
 
 
@@ -101,11 +103,15 @@ def fit_kinematics(observations: Observations, config: KinematicConfig = Kinemat
     cache = Cache("kinematics")
     if config.use_cache and (hit := cache.get(key)) is not None:
         log("cached result")
-        return _from_arrays(hit)
-    fit = fit_variants(observations, (config.variant,), config, height=height, mass=mass,
-                       camera_K=K, log=log)[config.variant]
-    if config.use_cache:
-        cache.put(key, _to_arrays(fit))
+        fit = _from_arrays(hit)
+    else:
+        fit = fit_variants(observations, (config.variant,), config, height=height, mass=mass,
+                           camera_K=K, log=log)[config.variant]
+        if config.use_cache:
+            cache.put(key, _to_arrays(fit))
+    message = diagnostics.label_exchange_message(fit.label_exchanges, fit.fps)
+    if message:  # given again for a cached fit
+        _log.warning(message)
     return fit
 
 
@@ -125,6 +131,7 @@ class _Context:
     params: Params         # variant S
     problem: Problem
     timings: dict
+    label_exchanges: dict  # swaps.unswap's long runs of exchanged limb labels
 
     def problem_at(self, params: Params, plane: np.ndarray = np.zeros(4),
                    support: np.ndarray | None = None) -> Problem:
@@ -156,8 +163,9 @@ def _prepare(obs: Observations, cfg: KinematicConfig, height, mass, K_given, tim
          else cam.check_intrinsics(K_given, obs.source))
     focal_prior = focal_prior if K_given is None else float(K[0, 0])
     ev = gather_evidence(obs, K, cfg.pose.min_confidence, cfg.pose.ray_aligned_world)
+    exchanges: dict = {}
     if cfg.fix_swaps:
-        ev = unswap(ev)
+        ev, exchanges = unswap(ev)
     reference = surface_points(BodyShape.from_height(1.7))
     settings = settings_from(cfg.pose, cfg.ground_plane, cfg.shape, cfg.camera, reference)
     timer.lap("evidence")
@@ -185,7 +193,8 @@ def _prepare(obs: Observations, cfg: KinematicConfig, height, mass, K_given, tim
                             cfg.pose.init_iterations)
     ctx = _Context(obs=obs, cfg=cfg, ev=ev, K=K, focal_prior=focal_prior,
                    K_given=K_given is not None, shape=shape, surface=surface, height=height,
-                   params=params, problem=problem, timings=timer.timings)
+                   params=params, problem=problem, timings=timer.timings,
+                   label_exchanges=exchanges)
     ctx = dataclasses.replace(ctx, problem=ctx.problem_at(params))
     timer.lap("init")
     return ctx
@@ -343,7 +352,8 @@ def _result(ctx: _Context, cfg: KinematicConfig, params: Params, problem: Proble
     return KinematicFit(fps=float(obs.fps), shape=shape, qpos=qpos, joints=joints,
                         landmarks=landmarks, camera_K=K, T_world2cam=T_world2cam,
                         variant=cfg.variant, ground_estimated=cfg.ground, losses=losses,
-                        timings=timings, support_heights=support if support.any() else None)
+                        timings=timings, support_heights=support if support.any() else None,
+                        label_exchanges=ctx.label_exchanges)
 
 
 def _observation_arrays(obs: Observations) -> dict:
@@ -358,7 +368,7 @@ def _observation_arrays(obs: Observations) -> dict:
 def _to_arrays(fit: KinematicFit) -> dict[str, np.ndarray]:
     meta = {"fps": fit.fps, "shape": dataclasses.asdict(fit.shape), "variant": fit.variant,
             "ground_estimated": fit.ground_estimated, "losses": fit.losses,
-            "timings": fit.timings}
+            "timings": fit.timings, "label_exchanges": fit.label_exchanges}
     arrays = {"qpos": fit.qpos, "joints": fit.joints, "landmarks": fit.landmarks,
               "camera_K": fit.camera_K, "T_world2cam": fit.T_world2cam,
               "meta": np.array(json.dumps(meta))}
@@ -373,4 +383,5 @@ def _from_arrays(a: dict[str, np.ndarray]) -> KinematicFit:
                         joints=a["joints"], landmarks=a["landmarks"], camera_K=a["camera_K"],
                         T_world2cam=a["T_world2cam"], variant=meta["variant"],
                         ground_estimated=meta["ground_estimated"], losses=meta["losses"],
-                        timings=meta["timings"], support_heights=a.get("support_heights"))
+                        timings=meta["timings"], support_heights=a.get("support_heights"),
+                        label_exchanges=meta.get("label_exchanges"))

@@ -29,6 +29,8 @@ class KinematicFit:
     support_heights: np.ndarray | None = None  # (T,) m, the raised support's top the feet were
                                  # stood on in each frame (0: the floor); None: no raised feet
     timings: dict = dataclasses.field(default_factory=dict)  # seconds per sub-step
+    label_exchanges: dict | None = None  # limb group -> [first, last] frames the swap repair
+                                 # kept exchanged for 0.5 s or more; None: not recorded
 
     @property
     def num_frames(self) -> int:

@@ -46,15 +46,12 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-import logging
 import math
 
 import numpy as np
 
 from physpose.joints import LANDMARK_INDEX, LANDMARK_NAMES
 from physpose.kinematics.evidence import Evidence
-
-_log = logging.getLogger(__name__)
 
 GROUPS: dict[str, tuple[str, ...]] = {
     "legs": ("knee", "ankle", "heel", "foot_index"),
@@ -237,19 +234,15 @@ def long_exchanges(ev: Evidence, paths: dict[str, np.ndarray]) -> dict[str, list
     return out
 
 
-def unswap(ev: Evidence) -> Evidence:
-    """Evidence with the detected limb swaps undone (see the module docstring). A limb kept
-    exchanged against the detector's labels for LONG_EXCHANGE or longer is logged: where the
-    detector's swaps are short that is where a wrong repair lies (bench_swaps)."""
+def unswap(ev: Evidence) -> tuple[Evidence, dict[str, list[list[int]]]]:
+    """Evidence with the detected limb swaps undone (see the module docstring), and each limb
+    group's runs of frames [first, last] kept exchanged against the detector's labels for
+    LONG_EXCHANGE or longer: where the detector's swaps are short, that is where a wrong
+    repair lies (bench_swaps), so the user is told (diagnostics.label_exchange_message)."""
     uv, weight, world = ev.uv, ev.weight, ev.world_ray
     paths = swap_paths(ev)
-    for name, runs in long_exchanges(ev, paths).items():
-        for run in runs:
-            _log.warning("swap repair: the %s' left/right labels are exchanged against the "
-                         "detector's at frames %d-%d of the fit (%.1f s); seen from the side "
-                         "MediaPipe's 3d tells the limbs apart poorly, so check the fit there "
-                         "(the repair is KinematicConfig.fix_swaps)", name, run[0], run[-1],
-                         run.size / ev.fps)
+    long_runs = {name: [[int(run[0]), int(run[-1])] for run in runs]
+                 for name, runs in long_exchanges(ev, paths).items() if runs}
     for name, swapped in paths.items():
         rows = np.flatnonzero(swapped)
         if rows.size:
@@ -257,4 +250,4 @@ def unswap(ev: Evidence) -> Evidence:
             uv = _exchange(uv, rows, left, right)
             weight = _exchange(weight, rows, left, right)
             world = _exchange(world, rows, left, right)
-    return dataclasses.replace(ev, uv=uv, weight=weight, world_ray=world)
+    return dataclasses.replace(ev, uv=uv, weight=weight, world_ray=world), long_runs
