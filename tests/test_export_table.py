@@ -90,7 +90,7 @@ def test_forces_table_round_trip(tmp_path):
     with path.open() as f:
         rows = list(csv.DictReader(f))
     assert tuple(rows[0]) == forces_columns() and len(rows) == 20
-    assert len(forces_columns()) == 2 + 9 + 6 + 48 + 2
+    assert len(forces_columns()) == 2 + 9 + 6 + 48 + 2 + 3
     fz = np.array([[float(r["l_foot_fz_n"]), float(r["r_foot_fz_n"])] for r in rows])
     assert np.abs(fz - rec.grf_physics[:, :2, 2]).max() < 1e-6
     torque = np.array([float(r["r_knee_y_torque_nm"]) for r in rows])
@@ -128,6 +128,40 @@ def test_tables_say_where_each_frame_is_in_the_video(tmp_path):
     with export(later, "forces").open() as f:
         rows = list(csv.DictReader(f))
     assert rows[4]["video_frame"] == "70" and float(rows[4]["video_time"]) == pytest.approx(2.32)
+
+
+def test_tables_mark_the_frames_not_to_trust(tmp_path):
+    """Undetected frames (inferred from their neighbours), the physics' restarts (it jumps
+    there) and its windows without a valid sample are marked per frame in every table: the
+    npz and the summary had said so, the exports had not."""
+    rec = Reconstruction.load(save_result(tmp_path / "base", num_frames=8) / "reconstruction.npz")
+    kp = rec.keypoints2d.copy()
+    kp[2:4, :, 2] = 0.0  # no detection in frames 2-3
+    marked = rec.replace(keypoints2d=kp, meta={
+        **rec.meta, "dynamics": {**(rec.meta.get("dynamics") or {}), "restarts": [5]},
+        "diagnostics": {"invalid_windows": [[6, 7]]}})
+    folder = tmp_path / "marked"
+    folder.mkdir()
+    marked.save(folder / "reconstruction.npz")
+    with export(folder, "csv").open() as f:
+        rows = [r for r in csv.DictReader(f) if r["joint"] == rec.joint_names[0]]
+    by_motion = {m: [r for r in rows if r["motion"] == m] for m in ("kinematic", "physics")}
+    for motion_rows in by_motion.values():
+        assert [r["detected"] for r in motion_rows] == list("11001111")
+    assert [r["physics_restart"] for r in by_motion["physics"]] == list("00000100")
+    assert [r["physics_invalid"] for r in by_motion["physics"]] == list("00000011")
+    assert {r["physics_restart"] for r in by_motion["kinematic"]} == {""}
+    doc = json.loads(export(folder, "json").read_text())
+    assert doc["detected"] == [True, True, False, False, True, True, True, True]
+    assert doc["physics_restart"] == [f == 5 for f in range(8)]
+    assert doc["physics_invalid"] == [f >= 6 for f in range(8)]
+    with export(folder, "forces").open() as f:
+        rows = list(csv.DictReader(f))
+    assert [r["physics_restart"] for r in rows] == list("00000100")
+    assert [r["detected"] for r in rows] == list("11001111")
+    kinematic = json.loads(export(save_result(tmp_path / "kin", num_frames=3, physics=False),
+                                  "json").read_text())
+    assert kinematic["detected"] == [True] * 3 and kinematic["physics_restart"] is None
 
 
 def test_forces_need_a_physics_result(tmp_path):

@@ -155,6 +155,23 @@ class Reconstruction:
         return self.keypoints2d[..., 2].max(axis=1) <= 0
 
     @property
+    def restart_flags(self) -> np.ndarray:
+        """(T,) bool: True at each of `restarts` (the physics motion jumps there)."""
+        flags = np.zeros(self.num_frames, dtype=bool)
+        flags[[f for f in self.restarts if 0 <= f < self.num_frames]] = True
+        return flags
+
+    @property
+    def invalid_physics(self) -> np.ndarray:
+        """(T,) bool: frames of dynamics windows in which no simulated sample stayed valid (the
+        physics motion there is the least bad fall, not a reconstruction), from meta
+        ["diagnostics"]["invalid_windows"]; all False where not recorded."""
+        flags = np.zeros(self.num_frames, dtype=bool)
+        for first, last in (self.meta.get("diagnostics") or {}).get("invalid_windows") or []:
+            flags[int(first):int(last) + 1] = True
+        return flags
+
+    @property
     def undetected_runs(self) -> list[tuple[int, int]]:
         """(first, last) frames of each run of `undetected` frames."""
         return frame_runs(self.undetected)

@@ -14,52 +14,71 @@ from physpose.reconstruction import GRF_PARTS, Reconstruction
 from physpose.render.result import joints_of
 from physpose.skeleton import DOF_NAMES
 
-# video_frame, video_time: the frame in the source video and seconds into it (what --start and
-# --end take); last, so tables read by column number before they came keep their columns.
-CSV_COLUMNS = ("frame", "time", "motion", "joint", "x", "y", "z", "video_frame", "video_time")
+# After the joint: where the frame lies in the source video (its frame, seconds into it: what
+# --start and --end take), then how far to trust it (FLAG_COLUMNS). Appended in that order as
+# they came, so tables read by column number before keep their columns.
+VIDEO_COLUMNS = ("video_frame", "video_time")
+# detected: 1 where the detector saw the person, 0 where the motion is inferred from the frames
+# around; physics_restart: 1 where the physics motion restarts from the kinematic estimate (it
+# jumps there); physics_invalid: 1 in windows where no simulated sample stayed valid. The two
+# physics cells are empty on kinematic rows and for results without physics.
+FLAG_COLUMNS = ("detected", "physics_restart", "physics_invalid")
+CSV_COLUMNS = ("frame", "time", "motion", "joint", "x", "y", "z", *VIDEO_COLUMNS, *FLAG_COLUMNS)
 _DECIMALS = 6  # metres: micrometre resolution
 
 
-def _video_cells(rec: Reconstruction) -> list[tuple[str, str]]:
-    """Per frame, the source video's frame and seconds into the footage as CSV cells (empty
-    where the result does not record them)."""
+def _frame_cells(rec: Reconstruction, physics: bool) -> list[tuple[str, ...]]:
+    """Per frame, the VIDEO_COLUMNS and FLAG_COLUMNS cells (empty where the result does not
+    record them; the physics flags only for `physics` rows of a result with physics)."""
     frames, times = rec.video_frames, rec.video_times
+    detected = ~rec.undetected
+    physics = physics and rec.has_physics
+    restart, invalid = rec.restart_flags, rec.invalid_physics
     return [("" if frames is None else str(int(frames[t])),
-             "" if times is None else f"{times[t]:.6f}") for t in range(rec.num_frames)]
+             "" if times is None else f"{times[t]:.6f}", str(int(detected[t])),
+             str(int(restart[t])) if physics else "", str(int(invalid[t])) if physics else "")
+            for t in range(rec.num_frames)]
 
 
 def write_csv(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) -> Path:
     """Write frame, time (s from the first frame), motion, joint, x, y, z (m, world z up),
-    video_frame, video_time (s into the footage) for each motion; returns path."""
+    video_frame, video_time (s into the footage) and the FLAG_COLUMNS for each motion; returns
+    path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     times = np.arange(rec.num_frames) / rec.fps
-    video = _video_cells(rec)
     with path.open("w", newline="") as f:
         out = csv.writer(f)
         out.writerow(CSV_COLUMNS)
         for motion in motions:
             joints = joints_of(rec, motion)
+            cells = _frame_cells(rec, physics=motion == "physics")
             for t in range(rec.num_frames):
                 for j, name in enumerate(rec.joint_names):
                     x, y, z = (f"{v:.{_DECIMALS}f}" if np.isfinite(v) else ""
                                for v in joints[t, j])  # a lost joint: empty, as in forces.csv
-                    out.writerow((t, f"{times[t]:.6f}", motion, name, x, y, z, *video[t]))
+                    out.writerow((t, f"{times[t]:.6f}", motion, name, x, y, z, *cells[t]))
     return path
 
 
 def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) -> Path:
-    """Write {fps, units, axes, joint_names, time, video_frames, video_times, motions: {name:
-    (T, J, 3) nested lists}}; video_frames and video_times null where not recorded."""
+    """Write {fps, units, axes, joint_names, time, video_frames, video_times, detected,
+    physics_restart, physics_invalid, motions: {name: (T, J, 3) nested lists}}; video_frames
+    and video_times null where not recorded, the per-frame flags (FLAG_COLUMNS) true/false,
+    the physics ones null without physics."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     frames, times = rec.video_frames, rec.video_times
+    physics = rec.has_physics
     doc = {
         "fps": rec.fps, "units": "m", "axes": "world: z up, ground plane z = 0",
         "joint_names": list(rec.joint_names),
         "time": np.round(np.arange(rec.num_frames) / rec.fps, 6).tolist(),
         "video_frames": None if frames is None else frames.tolist(),
         "video_times": None if times is None else np.round(times, 6).tolist(),
+        "detected": (~rec.undetected).tolist(),
+        "physics_restart": rec.restart_flags.tolist() if physics else None,
+        "physics_invalid": rec.invalid_physics.tolist() if physics else None,
         "motions": {m: np.round(joints_of(rec, m), _DECIMALS).tolist() for m in motions},
     }
     path.write_text(strict_json(doc, separators=(",", ":")))  # a lost joint as null
@@ -69,11 +88,11 @@ def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) 
 def forces_columns() -> tuple[str, ...]:
     """Columns of the forces table: frame, time (s), the force on each of GRF_PARTS (N, world
     axes), the centre of pressure under each foot (m), the torque across each hinge (N m),
-    video_frame and video_time (as in CSV_COLUMNS)."""
+    then VIDEO_COLUMNS and FLAG_COLUMNS (as in CSV_COLUMNS)."""
     grf = [f"{part}_f{axis}_n" for part in GRF_PARTS for axis in "xyz"]
     cop = [f"{side}_cop_{axis}_m" for side in ("l", "r") for axis in "xyz"]
     return ("frame", "time", *grf, *cop, *(f"{name}_torque_nm" for name in DOF_NAMES),
-            "video_frame", "video_time")
+            *VIDEO_COLUMNS, *FLAG_COLUMNS)
 
 
 def write_forces_csv(rec: Reconstruction, path: str | Path) -> Path:
@@ -90,12 +109,12 @@ def write_forces_csv(rec: Reconstruction, path: str | Path) -> Path:
                              rec.cop_physics.reshape(rec.num_frames, -1),
                              rec.torques_physics], axis=1)
     times = np.arange(rec.num_frames) / rec.fps
-    video = _video_cells(rec)
+    cells = _frame_cells(rec, physics=True)
     with path.open("w", newline="") as f:
         out = csv.writer(f)
         out.writerow(forces_columns())
         for t, row in enumerate(values):
             out.writerow((t, f"{times[t]:.6f}",
                           *(f"{v:.{_DECIMALS}f}" if np.isfinite(v) else "" for v in row),
-                          *video[t]))
+                          *cells[t]))
     return path

@@ -93,10 +93,8 @@ def _plots(rec: Reconstruction, bodies: dict[str, BodyMotion | None]) -> list[di
                       "ylabel": "m", "x": time, "series": com, "cursor": True})
     if rec.has_physics:
         gap = np.linalg.norm(rec.joints_physics - rec.joints_kinematic, axis=-1).mean(axis=1)
-        restarts = np.zeros(rec.num_frames, dtype=bool)
-        restarts[[f for f in rec.restarts if 0 <= f < rec.num_frames]] = True
         undetected = rec.undetected
-        bands = [{"name": "restart from the estimate (a jump)", "on": restarts.tolist(),
+        bands = [{"name": "restart from the estimate (a jump)", "on": rec.restart_flags.tolist(),
                   "color": "#c0392b"}]
         if undetected.any():
             bands.append({"name": "no person detected", "on": undetected.tolist(),
