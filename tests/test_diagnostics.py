@@ -11,7 +11,7 @@ import pytest
 from physpose import diagnostics
 from physpose.cli.reconstruct import diagnostics_lines
 from physpose.kinematics.camera import world_from_plane
-from physpose.metrics import camera_height
+from physpose.metrics import camera_height, camera_tilt
 
 
 def _walker(frames: int, fps: float, speed_px: float = 300.0, size: float = 400.0) -> np.ndarray:
@@ -221,12 +221,34 @@ def test_a_camera_found_low_above_or_below_the_floor_is_warned_about():
         n = np.array([0.1, -0.95, -0.3]) / np.linalg.norm([0.1, -0.95, -0.3])
         T = world_from_plane(n, offset, np.array([0.4, 0.2, 4.0]))
         assert camera_height(T) == pytest.approx(offset)
-    assert diagnostics.low_camera_message(1.3) is None
-    assert diagnostics.low_camera_message(None) is None
-    assert diagnostics.low_camera_message(float("nan")) is None
-    assert diagnostics.low_camera_message(diagnostics.LOW_CAMERA) is None
-    line = diagnostics.low_camera_message(-0.37)
+    assert diagnostics.camera_pose_message(1.3) is None
+    assert diagnostics.camera_pose_message(None) is None
+    assert diagnostics.camera_pose_message(float("nan")) is None
+    assert diagnostics.camera_pose_message(diagnostics.LOW_CAMERA) is None
+    line = diagnostics.camera_pose_message(-0.37)
     assert "the camera 0.37 m below it" in line and "lying" in line and "--start/--end" in line
-    assert "the camera 0.29 m above it" in diagnostics.low_camera_message(0.29)
+    assert "the camera 0.29 m above it" in diagnostics.camera_pose_message(0.29)
     assert diagnostics.warning_lines({"camera_height": -0.37}, 25.0) == [line]
     assert diagnostics.warning_lines({"camera_height": 1.3}, 25.0) == []
+
+
+def test_a_camera_found_tilted_far_from_upright_is_warned_about():
+    """A body lying throughout, its floor found under the soles: motion-capture clips laid
+    flat put the camera 29-127 degrees from upright, upright people at most 35.6 (stop 75)."""
+    level = world_from_plane(np.array([0.0, -1.0, 0.0]), 1.3, np.array([0.0, 0.0, 4.0]))
+    assert camera_tilt(level) == pytest.approx(0.0, abs=1e-6)
+    for roll, pitch in ((0.0, 30.0), (50.0, 0.0), (30.0, 40.0), (-120.0, 10.0)):
+        r, p = np.radians(roll), np.radians(pitch)
+        up = np.array([np.sin(r) * np.cos(p), -np.cos(r) * np.cos(p), -np.sin(p)])
+        T = world_from_plane(up, 1.3, np.array([0.0, 0.0, 4.0]))
+        expected = np.degrees(np.arccos(np.cos(r) * np.cos(p)))
+        assert camera_tilt(T) == pytest.approx(expected, abs=1e-6)
+        line = diagnostics.camera_pose_message(1.3, camera_tilt(T))
+        assert (line is not None) == (expected >= diagnostics.TILTED_CAMERA)
+    line = diagnostics.camera_pose_message(1.3, 61.0)
+    assert "tilts the camera 61 degrees from upright" in line and "lying" in line
+    assert "on its side" in line
+    both = diagnostics.camera_pose_message(-0.2, 61.0)
+    assert "0.20 m below it and tilts the camera 61 degrees" in both
+    assert diagnostics.warning_lines({"camera_height": 1.3, "camera_tilt": 61.0}, 25.0) == [line]
+    assert diagnostics.warning_lines({"camera_height": 1.3, "camera_tilt": 35.6}, 25.0) == []

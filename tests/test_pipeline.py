@@ -15,7 +15,7 @@ from physpose.cli import main
 from physpose.dynamics import PRESETS
 from physpose.dynamics.synthetic import simulated_clip
 from physpose.errors import PhysposeError
-from physpose.diagnostics import LOW_CAMERA, trimmed_message
+from physpose.diagnostics import LOW_CAMERA, TILTED_CAMERA, trimmed_message
 from physpose.pipeline import (CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig,
                                _screen_observations, reconstruct, trim_unseen_ends,
                                unsure_times)
@@ -154,11 +154,12 @@ def test_reconstruct_writes_the_contract(tmp_path):
     # A clean simulated clip raises none of the input warnings (physpose.diagnostics).
     found = dict(loaded.meta["diagnostics"])
     assert found.pop("camera_height") > LOW_CAMERA  # the floor from a standing body
+    assert found.pop("camera_tilt") < TILTED_CAMERA
     assert found == {"trimmed": None, "trimmed_times": None, "observed_frames": t,
                      "camera_motion": None, "unsure_detections": [], "person_jumps": [],
                      "person_jump_times": [], "hidden_feet": 0.0, "raised": [], "supports": [], "seated": [],
                      "seats": [], "invalid_windows": [], "unrecorded_forces": [],
-                     "stride_period": None}
+                     "stride_period": None, "label_exchanges": {}}
     # The simulated forces are in the contract's file: the floor carries the body's weight.
     assert loaded.grf_physics.shape == (t, 3, 3) and loaded.torques_physics.shape == (t, 48)
     weight = mujoco.MjModel.from_xml_string(loaded.body_mjcf).body_subtreemass[0] * 9.81

@@ -23,12 +23,12 @@ somersaults off it, and back), and what the dynamics stage makes of them:
 - `rate_message`: an analysis rate above the rates the kinematic fit was measured at.
 - `label_exchange_message`: where the kinematic fit's swap repair kept a limb's left/right
   labels exchanged against the detector's for half a second or more (a wrong repair's sign).
-- `low_camera_message`: where the kinematic fit put the camera above the floor it found
-  (`metrics.camera_height`). Under
-  LOW_CAMERA above it, or below it, the person was most likely low to the floor for the whole
-  clip (lying, crawling, kneeling): the plane fit cannot tell the floor from the body's other
-  sides then, and the floor, the placement and the physics are wrong (docs/kinematics.md,
-  limits).
+- `camera_pose_message`: where the kinematic fit put the camera relative to the floor it
+  found (`metrics.camera_height`, `metrics.camera_tilt`). Under LOW_CAMERA above it, below
+  it, or tilted TILTED_CAMERA or more from upright, the person was most likely low to the
+  floor for the whole clip (lying, crawling, kneeling): the plane fit cannot tell the floor
+  from the body's other sides then, and the floor, the placement and the physics are wrong
+  (docs/kinematics.md, limits).
 - `stride_period`: how long the feet take to alternate when the person walks or runs. A
   stride far slower than people walk or run hints at slow-motion footage, which the physics
   must be told of (`--slow-motion`): under real gravity it cannot move as slowly as the person
@@ -46,6 +46,11 @@ from physpose.scene import parse_obstacle
 
 MIN_CONFIDENCE = 0.3       # landmarks that count for the person's image box
 LOW_CAMERA = 0.3           # m: a camera found lower above the floor is warned about
+# degrees from upright (pitch and roll together): a camera found tilted more is warned about.
+# Stop 75: upright people gave at most 35.6 (pose2sim's cam04, truly so tilted; 187 cached
+# fits of the benchmark's clips and views); motion-capture clips laid flat gave 29-127 in 15
+# runs, 10 of them over 45 (scratch lyingroll75.py).
+TILTED_CAMERA = 45.0
 JUMP_SIZES = 0.4           # a jump: the box centre moves more than this many box diagonals ...
 JUMP_SPEED = 6.0           # ... plus this many box diagonals per second between the detections
 RAISED_HEIGHT = 0.3        # m, lowest sole point above the floor ...
@@ -363,17 +368,24 @@ def label_exchange_message(runs: dict[str, list[list[int]]] | None, fps: float
             "turns the repair off)")
 
 
-def low_camera_message(height: float | None) -> str | None:
-    """A warning when the kinematic fit put the camera under LOW_CAMERA above its floor."""
-    if height is None or not np.isfinite(height) or height >= LOW_CAMERA:
+def camera_pose_message(height: float | None, tilt: float | None = None) -> str | None:
+    """A warning when the kinematic fit put the camera under LOW_CAMERA above its floor, or
+    tilted it TILTED_CAMERA degrees or more from upright (`metrics.camera_tilt`)."""
+    found = []
+    if height is not None and np.isfinite(height) and height < LOW_CAMERA:
+        found.append(f"puts the camera {height:.2f} m above it" if height >= 0 else
+                     f"puts the camera {-height:.2f} m below it")
+    if tilt is not None and np.isfinite(tilt) and tilt >= TILTED_CAMERA:
+        found.append(f"tilts the camera {tilt:.0f} degrees from upright (a level camera: 0; "
+                     "filmed people: under 40)")
+    if not found:
         return None
-    where = f"{height:.2f} m above it" if height >= 0 else f"{-height:.2f} m below it"
-    return (f"kinematics: the floor found puts the camera {where}. Unless the camera really "
-            "stood that low, the person was low to the floor for the whole clip (lying, "
-            "crawling, kneeling), where physpose cannot tell the floor from the body's other "
-            "sides: the floor, the body's placement and the physics are then wrong "
-            "(docs/kinematics.md, Conventions and limits). Analyse a stretch in which the "
-            "person also stands (widen --start/--end)")
+    return (f"kinematics: the floor found {' and '.join(found)}. Unless the camera really "
+            "stood so (or the video lies on its side: turn it upright first), the person was "
+            "low to the floor for the whole clip (lying, crawling, kneeling), where physpose "
+            "cannot tell the floor from the body's other sides: the floor, the body's "
+            "placement and the physics are then wrong (docs/kinematics.md, Conventions and "
+            "limits). Analyse a stretch in which the person also stands (widen --start/--end)")
 
 
 def invalid_message(runs: list[tuple[int, int]], fps: float) -> str | None:
@@ -408,7 +420,7 @@ def warning_lines(found: dict, fps: float, slow_motion: float = 1.0) -> list[str
              jumps_message(found.get("person_jumps", []), fps,
                            found.get("person_jump_times")),
              hidden_feet_message(found.get("hidden_feet", 0.0)),
-             low_camera_message(found.get("camera_height")),
+             camera_pose_message(found.get("camera_height"), found.get("camera_tilt")),
              label_exchange_message(found.get("label_exchanges"), fps),
              raised_message([tuple(r) for r in found.get("raised", [])], fps,
                             supported=bool(found.get("supports"))),

@@ -69,6 +69,13 @@ def camera_height(T_world2cam: np.ndarray) -> float:
     return float(-(T[:3, :3].T @ T[:3, 3])[2])
 
 
+def camera_tilt(T_world2cam: np.ndarray) -> float:
+    """Degrees between the floor's up direction and the image's up axis (-y) of a world ->
+    camera transform: 0 for a level camera, its pitch and roll together otherwise."""
+    up = np.asarray(T_world2cam, dtype=float)[:3, :3] @ np.array([0.0, 0.0, 1.0])
+    return float(np.degrees(np.arccos(np.clip(-up[1] / np.linalg.norm(up), -1.0, 1.0))))
+
+
 def project(points: np.ndarray, K: np.ndarray, T_world2cam: np.ndarray) -> np.ndarray:
     """Pinhole projection of world points (..., 3) to pixels (..., 2)."""
     cam = transform_points(T_world2cam, points)

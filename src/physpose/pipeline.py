@@ -232,7 +232,8 @@ def _scene_for(kin: KinematicFit, config: PipelineConfig) -> tuple[SceneConfig, 
     """The configured scene plus the supports and seats the estimate asks for (with
     config.auto_support), and what was found (meta["diagnostics"]); problems are logged."""
     camera_height = metrics.camera_height(kin.T_world2cam)
-    _warn(diagnostics.low_camera_message(camera_height))
+    camera_tilt = metrics.camera_tilt(kin.T_world2cam)
+    _warn(diagnostics.camera_pose_message(camera_height, camera_tilt))
     raised = diagnostics.raised_runs(kin.joints, kin.fps)
     boxes = supports.support_boxes(kin.joints, raised, kin.fps, kin.support_heights) \
         if config.auto_support else ()
@@ -240,7 +241,8 @@ def _scene_for(kin: KinematicFit, config: PipelineConfig) -> tuple[SceneConfig, 
     seated = supports.seated_runs(kin.joints, kin.fps)
     seats = supports.seat_boxes(kin.joints, seated) if config.auto_support else ()
     _warn(diagnostics.seated_message(seated, seats, kin.fps))
-    found = {"camera_height": camera_height, "label_exchanges": kin.label_exchanges,
+    found = {"camera_height": camera_height, "camera_tilt": camera_tilt,
+             "label_exchanges": kin.label_exchanges,
              "raised": [list(r) for r in raised],
              "supports": [[*b.center, *b.size] for b in boxes],
              "seated": [list(r) for r in seated], "seats": [b.spec() for b in seats]}

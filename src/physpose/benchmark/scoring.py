@@ -15,7 +15,8 @@ import numpy as np
 
 from physpose.benchmark.material import Clip, Truth
 from physpose.joints import joint_confidence, joints_from_landmarks
-from physpose.metrics import CONTACT_PRESETS, camera_height, evaluate, project, transform_points
+from physpose.metrics import (CONTACT_PRESETS, camera_height, camera_tilt, evaluate, project,
+                             transform_points)
 from physpose.reconstruction import Reconstruction
 
 TRUTH_ROW = "(ground truth)"  # the row that scores the truth's own plausibility
@@ -80,8 +81,7 @@ def ground_figures(T_est_world2cam: np.ndarray, truth: Truth | None) -> dict[str
     """
     normal = T_est_world2cam[:3, :3] @ _UP
     height = camera_height(T_est_world2cam)
-    out = {"camera_height_m": height,
-           "camera_tilt_deg": _angle_deg(normal, np.array([0.0, -1.0, 0.0]))}
+    out = {"camera_height_m": height, "camera_tilt_deg": camera_tilt(T_est_world2cam)}
     if truth is not None:
         true_height = camera_height(truth.T_world2cam)
         out.update(normal_angle_error_deg=_angle_deg(normal, truth.T_world2cam[:3, :3] @ _UP),

@@ -14,12 +14,12 @@ import numpy as np
 
 from physpose import __version__
 from physpose.cli.observe import add_video_options, config_from_args, refuse_video_options
-from physpose.diagnostics import low_camera_message, rate_message
+from physpose.diagnostics import camera_pose_message, rate_message
 from physpose.errors import PhysposeError
 from physpose.kinematics.camera import check_intrinsics
 from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
 from physpose.kinematics.fit import fit_kinematics, stderr_log
-from physpose.metrics import camera_height
+from physpose.metrics import camera_height, camera_tilt
 from physpose.observations import check_slow_motion
 from physpose.observe import footage_observe
 from physpose.paths import check_output_folder
@@ -98,14 +98,15 @@ def _run(args: argparse.Namespace) -> int:
     config = KinematicConfig.preset(args.variant, use_cache=not args.no_cache)
     fit = fit_kinematics(obs, config, height=args.height, mass=args.mass, camera_K=K,
                          log=stderr_log)
-    height_found = camera_height(fit.T_world2cam)
-    low = low_camera_message(height_found)
-    if low:
-        print(f"warning: {low}", file=sys.stderr, flush=True)
+    height_found, tilt_found = camera_height(fit.T_world2cam), camera_tilt(fit.T_world2cam)
+    doubt = camera_pose_message(height_found, tilt_found)
+    if doubt:
+        print(f"warning: {doubt}", file=sys.stderr, flush=True)
     args.out.mkdir(parents=True, exist_ok=True)
     recon = reconstruction_of(fit, obs)
     recon = recon.replace(meta={**recon.meta, "slow_motion": args.slow_motion,
                                 "diagnostics": {"camera_height": height_found,
+                                                "camera_tilt": tilt_found,
                                                 "label_exchanges": fit.label_exchanges}})
     recon.save(args.out / RECONSTRUCTION_FILE)
     resolved = {"stage": "kinematics", "physpose_version": __version__,
