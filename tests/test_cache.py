@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import gc
+import sys
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from physpose.cache import Cache, atomic_path, canonical_json, file_digest, stage_key
+from physpose.npz_io import write_npz
 
 
 @dataclass(frozen=True)
@@ -129,3 +133,30 @@ def test_an_entry_damaged_inside_its_compressed_data_is_a_miss(tmp_path, caplog)
     good_path.with_suffix(".npy").rename(good_path)
     assert cache.get(key) is None and not good_path.exists()
     assert "unreadable cache entry" in caplog.text
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs Linux's /dev/full")
+def test_a_full_disk_is_one_clean_error(tmp_path, monkeypatch, caplog):
+    """Writing an npz onto a full disk (every temporary file opened for writing goes to
+    /dev/full) is the cache's one warning and the writers' OSError. numpy's zip writer, failing
+    on the file itself, had left a ZipFile whose clean-up printed "Exception ignored ... seek
+    of closed file" beside them."""
+    real_open = Path.open
+
+    def full_disk(self, mode="r", *args, **kwargs):
+        if ".tmp" in self.name and "w" in mode:
+            return open("/dev/full", mode)  # noqa: SIM115 (closed by the writer)
+        return real_open(self, mode, *args, **kwargs)
+
+    monkeypatch.setattr(Path, "open", full_disk)
+    ignored = []  # what Python would print as "Exception ignored in ..."
+    monkeypatch.setattr(sys, "unraisablehook", ignored.append)
+    arrays = {"a": np.random.default_rng(0).random(200_000)}
+    with caplog.at_level("WARNING", logger="physpose.cache"):
+        assert Cache("stage", root=tmp_path).put("ab" * 32, arrays) is None
+    assert "cannot store the stage result" in caplog.text
+    with pytest.raises(OSError):
+        write_npz(tmp_path / "x.npz", arrays)
+    gc.collect()
+    assert not ignored, [str(u.exc_value) for u in ignored]
+    assert not list(tmp_path.rglob("*.tmp*"))

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import io
 import json
 import logging
 import os
@@ -69,6 +70,18 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         os.replace(tmp, path)
     finally:
         tmp.unlink(missing_ok=True)
+
+
+def save_npz(path: str | Path, arrays: Mapping[str, Any], *, compressed: bool = True) -> None:
+    """Write arrays as an npz archive to exactly `path`, atomically (atomic_path). The archive
+    is built in memory first, so a write that fails (a full disk) raises a plain OSError:
+    numpy's zip writer, failing on the file itself, left a ZipFile whose clean-up printed
+    "Exception ignored ... seek of closed file" beside the run's own message."""
+    buffer = io.BytesIO()
+    (np.savez_compressed if compressed else np.savez)(
+        buffer, **{k: np.asarray(v) for k, v in arrays.items()})
+    with atomic_path(path) as tmp:
+        tmp.write_bytes(buffer.getbuffer())
 
 
 # atomic_path's temporary names: .<stem>.<pid>.<8 hex>.tmp<suffix>
@@ -189,8 +202,7 @@ class Cache:
         costs the next run its reuse: logged, and None returned."""
         path = self.path(key)
         try:
-            with atomic_path(path) as tmp, tmp.open("wb") as fh:
-                np.savez_compressed(fh, **{k: np.asarray(v) for k, v in arrays.items()})
+            save_npz(path, arrays)
         except OSError as exc:
             _log.warning("cannot store the %s result in the cache at %s (%s); going on "
                          "without it. set PHYSPOSE_CACHE_DIR to a folder you may write to",

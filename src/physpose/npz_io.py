@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physpose.cache import UNREADABLE_NPZ, atomic_path, npz_arrays
+from physpose.cache import UNREADABLE_NPZ, npz_arrays, save_npz
 from physpose.errors import PhysposeError
 
 
@@ -17,8 +17,7 @@ def write_npz(path: str | Path, arrays: dict[str, np.ndarray]) -> Path:
     if path.is_dir():
         raise PhysposeError("cannot write the npz file: this is a folder", path=path,
                             remedy=f"pass a file path, e.g. {path / 'name.npz'}")
-    with atomic_path(path) as tmp, tmp.open("wb") as fh:
-        np.savez_compressed(fh, **arrays)
+    save_npz(path, arrays)
     return path
 
 

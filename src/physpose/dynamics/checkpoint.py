@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from physpose.cache import UNREADABLE_NPZ, atomic_path, npz_arrays, stage_key
+from physpose.cache import UNREADABLE_NPZ, npz_arrays, save_npz, stage_key
 from physpose.paths import cache_dir
 
 _log = logging.getLogger(__name__)
@@ -44,9 +44,8 @@ def save_window(folder: Path, index: int, arrays: dict[str, np.ndarray], record:
     logged, and None returned."""
     path = window_path(folder, index)
     try:
-        with atomic_path(path) as tmp, tmp.open("wb") as fh:
-            np.savez(fh, record_json=np.array(json.dumps(record)),
-                     **{k: np.asarray(v) for k, v in arrays.items()})
+        save_npz(path, {"record_json": np.array(json.dumps(record)), **arrays},
+                 compressed=False)
     except OSError as exc:
         _log.warning("%s: cannot write this window's checkpoint (%s); the run goes on, but "
                      "an interruption would optimise this window again. Free space there or "
