@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from physpose.cli import SUBCOMMANDS, build_parser, main
-from physpose.cli.reconstruct import (camera_intrinsics, parse_formats, pipeline_config,
+from physpose.cli.reconstruct import (parse_formats, pipeline_config,
                                       print_summary, restarts_line, undetected_line)
 from physpose.dynamics import PRESETS
 from physpose.dynamics.config import available_cores
@@ -163,29 +163,6 @@ def test_export_formats():
     assert parse_formats("none") == () == parse_formats("")
     with pytest.raises(PhysposeError, match="'fbx'"):
         parse_formats("fbx")
-
-
-def test_json_camera(tmp_path):
-    path = tmp_path / "cam.json"
-    K = [[300.0, 0, 160], [0, 300.0, 120], [0, 0, 1]]
-    path.write_text(json.dumps({"K": K}))
-    assert np.allclose(camera_intrinsics(path, None, Path("v.mp4"), (320, 240)), K)
-
-
-def test_qualisys_camera_choice(pose2sim_demo):
-    calib = pose2sim_demo / "calibration" / "Calib.qca.txt"
-    # All four cameras are 1088 x 1920 (the videos 1080 x 1920, a crop): the file name decides.
-    k1 = camera_intrinsics(calib, None, Path("videos/cam01.mp4"), (1080, 1920))
-    k3 = camera_intrinsics(calib, "cam03", Path("videos/cam01.mp4"), (1080, 1920))
-    assert k1[0, 0] != k3[0, 0]
-    half = camera_intrinsics(calib, "cam01", Path("x.mp4"), (544, 960))
-    assert half[0, 0] == pytest.approx(k1[0, 0] / 2)
-    with pytest.raises(PhysposeError, match="cannot tell which camera.*cam01 \\(1088x1920\\)"):
-        camera_intrinsics(calib, None, Path("clip.mp4"), (1080, 1920))
-    with pytest.raises(PhysposeError, match="no camera named 'cam9'"):
-        camera_intrinsics(calib, "cam9", Path("clip.mp4"), (1080, 1920))
-    with pytest.raises(PhysposeError, match="calibrated for 1088x1920"):
-        camera_intrinsics(calib, "cam01", Path("clip.mp4"), (1920, 1080))
 
 
 def test_summary_lists_metrics_files_and_times(tmp_path, capsys):

@@ -10,19 +10,19 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from physpose import __version__
+from physpose.cli.camera_file import camera_intrinsics
 from physpose.cli.observe import add_video_options, config_from_args, refuse_video_options
 from physpose.diagnostics import camera_pose_message, rate_message
 from physpose.errors import PhysposeError
-from physpose.kinematics.camera import check_intrinsics
+from physpose.keypoints_io import is_keypoints_file, load_keypoints
 from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
 from physpose.kinematics.fit import fit_kinematics, stderr_log
 from physpose.metrics import camera_height, camera_tilt
 from physpose.observations import check_slow_motion
 from physpose.observe import footage_observe
 from physpose.paths import check_output_folder
+from physpose.video import probe
 
 RECONSTRUCTION_FILE = "reconstruction.npz"
 CONFIG_FILE = "config.json"
@@ -49,34 +49,15 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "played at 30): the fit runs on the real clock and --fps is the "
                         "analysis rate in real time (default 1)")
     p.add_argument("--camera", type=Path, metavar="CALIB",
-                   help="camera intrinsics: a JSON file with K = [[fx,0,cx],[0,fy,cy],[0,0,1]] "
-                        "or a text file of the 9 numbers (default: the focal length that a "
-                        "camera turning by 5 degrees or more reveals, else a 55-degree field of "
-                        "view across the image's diagonal)")
+                   help="camera calibration: a Qualisys .qca.txt, a JSON file with K = "
+                        "[[fx,0,cx],[0,fy,cy],[0,0,1]] or a text file of the 9 numbers "
+                        "(default: the focal length that a camera turning by 5 degrees or more "
+                        "reveals, else a 55-degree field of view across the image's diagonal)")
+    p.add_argument("--camera-name", metavar="NAME",
+                   help="which camera of a .qca.txt (default: the only one whose image size "
+                        "matches the video, else the one named in the input's file name)")
     p.add_argument("--no-overlay", action="store_true", help="skip the overlay video")
     p.set_defaults(func=_run)
-
-
-def read_intrinsics(path: Path) -> np.ndarray:
-    """K (3, 3) from a JSON file ({"K": ...} or the bare matrix) or a text file of 9 numbers."""
-    if not path.is_file():
-        raise PhysposeError("camera file not found", path=path, remedy="check the path")
-    if path.name.lower().endswith((".qca.txt", ".qca")):
-        raise PhysposeError("a Qualisys calibration holds several cameras; this takes one "
-                            "camera's intrinsics", path=path,
-                            remedy="use `physpose reconstruct --camera FILE --camera-name NAME`, "
-                                   'or write that camera\'s {"K": [[fx, 0, cx], [0, fy, cy], '
-                                   '[0, 0, 1]]} as JSON')
-    try:
-        if path.suffix.lower() == ".json":
-            doc = json.loads(path.read_text())
-            K = np.asarray(doc["K"] if isinstance(doc, dict) else doc, dtype=float)
-        else:
-            K = np.loadtxt(path, dtype=float)
-    except (ValueError, KeyError, TypeError, OSError) as exc:
-        raise PhysposeError(f"cannot read camera intrinsics ({exc})", path=path,
-                            remedy='write {"K": [[fx, 0, cx], [0, fy, cy], [0, 0, 1]]}') from None
-    return check_intrinsics(K.reshape(3, 3) if K.size == 9 else K, str(path))
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -85,11 +66,18 @@ def _run(args: argparse.Namespace) -> int:
 
     start = time.perf_counter()
     observe_cfg = config_from_args(args)
-    if args.input.suffix.lower() in (".npz", ".json"):
+    if is_keypoints_file(args.input):
         refuse_video_options(observe_cfg, args.input)
     check_slow_motion(args.slow_motion)
     check_output_folder(args.out)
-    K = read_intrinsics(args.camera) if args.camera is not None else None  # before the work
+    K = None  # read before the work
+    if args.camera is not None:
+        image_size = (load_keypoints(args.input) if is_keypoints_file(args.input)
+                      else probe(args.input)).image_size
+        K = camera_intrinsics(args.camera, args.camera_name, args.input, image_size)
+    elif args.camera_name is not None:
+        raise PhysposeError("--camera-name chooses a camera of the --camera calibration",
+                            remedy="give the Qualisys .qca.txt file with --camera")
     obs = load_observations(args.input, footage_observe(observe_cfg, args.slow_motion),
                             progress=sys.stderr.isatty()).on_real_clock(args.slow_motion)
     rate = rate_message(obs.fps)

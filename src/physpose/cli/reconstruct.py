@@ -16,11 +16,12 @@ from physpose.dynamics import PRESETS
 from physpose.dynamics.config import available_cores
 from physpose.dynamics.objective import TERMS, ObjectiveWeights
 from physpose.dynamics.travel import CAMERA_SETTINGS
+from physpose.cli.camera_file import camera_intrinsics
 from physpose.cli.observe import (PERSON_HELP, STATIC_CAMERA_HELP, image_point,
                                   refuse_video_options)
 from physpose.errors import PhysposeError
 from physpose.export import FORMATS
-from physpose.keypoints_io import is_keypoints_file
+from physpose.keypoints_io import is_keypoints_file, load_keypoints
 from physpose.observations import Observations
 from physpose.outputs import DEFAULT_FORMATS, METRICS_FILE, metrics_table, write_outputs
 from physpose.paths import check_output_folder
@@ -252,16 +253,16 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                                slow_motion=1.0 if args.slow_motion is None else args.slow_motion)
 
 
-def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:
-    """Fail fast on a missing/unreadable video or a time range outside it; returns the
-    video's (width, height), None for a keypoints file."""
+def check_input(video: Path, config: PipelineConfig) -> tuple[int, int]:
+    """Fail fast on a missing/unreadable video or keypoints file, or a time range outside the
+    video; returns the input's (width, height)."""
     from physpose import video as videolib  # noqa: PLC0415
 
     if is_keypoints_file(video):
         if not video.is_file():
             raise PhysposeError("keypoints file not found", path=video, remedy="check the path")
         refuse_video_options(config.observe, video)
-        return None
+        return load_keypoints(video).image_size
     info = videolib.probe(video)
     observe = config.footage_observe()
     videolib.plan_frames(info, observe.target_fps, observe.start, observe.end)
@@ -276,49 +277,6 @@ def check_person(height: float | None, mass: float | None) -> None:
         BodyShape.from_height(1.75, mass)
     elif height is not None:
         BodyShape.from_height(height, mass)
-
-
-def camera_intrinsics(path: Path, name: str | None, video: Path,
-                      image_size: tuple[int, int] | None) -> np.ndarray:
-    """K (3, 3) from a Qualisys .qca.txt (one camera of it) or a JSON/text intrinsics file."""
-    from physpose.cli.fit import read_intrinsics  # noqa: PLC0415
-
-    if not path.name.lower().endswith((".qca.txt", ".qca")):
-        if name is not None:
-            raise PhysposeError("--camera-name applies to a Qualisys .qca.txt calibration",
-                                path=path, remedy="drop --camera-name")
-        return read_intrinsics(path)
-    from physpose.multiview.qualisys import load_qualisys  # noqa: PLC0415
-
-    cameras = load_qualisys(path)
-    listing = ", ".join(f"{c.name} ({c.image_size[0]}x{c.image_size[1]})" for c in cameras)
-    if name is not None:
-        chosen = [c for c in cameras if c.name == name]
-        if not chosen:
-            raise PhysposeError(f"no camera named {name!r}; the file has {listing}", path=path,
-                                remedy="pass one of those names to --camera-name")
-    else:
-        chosen = cameras
-        if image_size is not None:
-            chosen = [c for c in cameras if _fits(c, image_size)]
-        if len(chosen) > 1:
-            chosen = [c for c in chosen if c.name.lower() in video.stem.lower()]
-        if len(chosen) != 1:
-            raise PhysposeError(f"cannot tell which camera filmed {video.name}; the file has "
-                                f"{listing}", path=path,
-                                remedy="choose one with --camera-name NAME")
-    camera = chosen[0]
-    if image_size is not None:
-        camera = camera.for_image_size(*image_size, source=video)
-    return camera.K
-
-
-def _fits(camera, image_size: tuple[int, int]) -> bool:
-    try:
-        camera.for_image_size(*image_size)
-    except PhysposeError:
-        return False
-    return True
 
 
 def restarts_line(recon: Reconstruction) -> str:

@@ -77,7 +77,9 @@ class CameraCalibration:
 
         Equal sizes return self; a difference within 1 % is a crop at the right/bottom (intrinsics
         unchanged, e.g. 1080-wide videos of a 1088-wide calibration); a uniform scale (binning,
-        resizing) scales the intrinsics; anything else (e.g. a rotated video) is an error.
+        resizing) scales the intrinsics, by the larger of the two sides' factors where they
+        differ within 1 % (a crop as well: the pixels stay square, 540x960 from 1088x1920 is
+        half of the 1080-wide crop); anything else (e.g. a rotated video) is an error.
         """
         cw, ch = self.image_size
         if (width, height) == (cw, ch):
@@ -87,8 +89,7 @@ class CameraCalibration:
         sx, sy = width / cw, height / ch
         if abs(sx - sy) <= _CROP_TOLERANCE * sx:
             K = self.K.copy()
-            K[0] *= sx
-            K[1] *= sy
+            K[:2] *= max(sx, sy)
             return replace(self, K=K, image_size=(width, height))
         raise PhysposeError(
             f"video is {width}x{height} but camera {self.name} is calibrated for {cw}x{ch}",
