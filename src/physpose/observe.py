@@ -74,7 +74,7 @@ from physpose.scene_cuts import CutFinder, cut_message
 from physpose.subject import (Follower, covers, detection_box, mask_outside, seed_regions,
                               square_crop, subject_regions, tiles)
 
-OBSERVE_VERSION = 14  # bump when a change alters what observe() returns for the same input
+OBSERVE_VERSION = 15  # bump when a change alters what observe() returns for the same input
 CROP_SIZE = 512      # px, side of the square crop a small person is followed in (subject.py)
 MIN_SEED_VISIBILITY = 0.5  # mean landmark visibility of a detection found in a tile
 HEAD_WARMUP = 3            # frames past the first sure detection the backward pass starts at

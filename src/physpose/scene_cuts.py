@@ -11,9 +11,15 @@ a runner, a camera travelling along a road, dark and noisy, mirrored, cropped, 1
 person blacked out for ten frames, Sports2D's sun flare), the histogram changed by at most
 0.33 and the thumbnail by at most 0.12 of the grey range; at the hard cuts of a helper's edited
 clips (black to a scene, one scene to another) by 0.94-1.0 and 0.26-0.29, and between frames
-of the three shared videos by 0.78-0.97 and 0.22-0.32. A cut between two views of one place is
-missed: pose2sim's four cameras of one room differ by 0.19-0.45 and 0.13-0.18, as much as the
-largest changes within a shot.
+of the three shared videos by 0.78-0.97 and 0.22-0.32. pose2sim's four cameras of one room
+differ by only 0.19-0.45 and 0.13-0.18, as much as the largest changes within a shot; what tells
+them apart is the thumbnails' structure. Aligned by the best shift of up to 4 px (a pan, a
+travelling camera) and with their mean grey removed (a change of light), consecutive
+thumbnails of a shot differed by at most 0.062 (a portrait crop of the tai chi clip, the person
+large in the picture; Sports2D's flare 0.057), the four views' first frames by 0.129-0.150
+(their histograms by 0.32-0.41), so such a change with the histogram's over 0.15 is a cut too
+(stop 75, scratch cuts75.py; a person blacked out at once: 0.18, a change undone within
+_TRANSITION frames, so no cut).
 """
 
 from __future__ import annotations
@@ -22,7 +28,10 @@ import cv2
 import numpy as np
 
 HISTOGRAM_CHANGE = 0.6  # share of the colour histogram that moves between two frames ...
-PIXEL_CHANGE = 0.2      # ... or mean grey change of the thumbnail (0-1) that makes a cut
+PIXEL_CHANGE = 0.2      # ... or mean grey change of the thumbnail (0-1) that makes a cut ...
+ALIGNED_CHANGE = 0.1    # ... or the aligned change (Signature.aligned_change) ...
+ALIGNED_HISTOGRAM = 0.15  # ... together with this histogram change
+_SHIFT = 4              # px of the thumbnail: the largest shift tried in aligning two
 _THUMBNAIL = (64, 36)   # px: small enough that noise and small motions average out
 _BINS = (8, 4, 4)       # hue, saturation, value
 _TRANSITION = 12        # frames: changes this close together are one transition
@@ -44,10 +53,25 @@ class Signature:
         grey = np.abs(self.grey.astype(np.int16) - other.grey.astype(np.int16))
         return moved, float(grey.mean()) / 255.0
 
+    def aligned_change(self, other: Signature) -> float:
+        """Mean grey change (0-1) of the thumbnails at the best shift of up to _SHIFT px,
+        each over the overlap with its mean removed: what a pan or a change of light leaves."""
+        a, b = self.grey.astype(np.float32) / 255.0, other.grey.astype(np.float32) / 255.0
+        h, w = a.shape
+        best = np.inf
+        for dy in range(-_SHIFT, _SHIFT + 1):
+            for dx in range(-_SHIFT, _SHIFT + 1):
+                pa = a[max(dy, 0):h + min(dy, 0), max(dx, 0):w + min(dx, 0)]
+                pb = b[max(-dy, 0):h + min(-dy, 0), max(-dx, 0):w + min(-dx, 0)]
+                best = min(best, float(np.abs((pa - pa.mean()) - (pb - pb.mean())).mean()))
+        return best
+
 
 def is_cut(before: Signature, after: Signature) -> bool:
     histogram, pixels = before.change(after)
-    return histogram >= HISTOGRAM_CHANGE or pixels >= PIXEL_CHANGE
+    if histogram >= HISTOGRAM_CHANGE or pixels >= PIXEL_CHANGE:
+        return True
+    return histogram >= ALIGNED_HISTOGRAM and before.aligned_change(after) >= ALIGNED_CHANGE
 
 
 class CutFinder:
