@@ -55,6 +55,8 @@ def test_fit_takes_one_camera_of_a_qualisys_calibration(pose2sim_demo, tmp_path,
     assert main(["fit", str(keypoints), "--out", str(out), "--variant", "S", "--no-overlay",
                  "--camera-name", "cam02"]) == 2
     assert "--camera-name chooses a camera of the --camera calibration" in capsys.readouterr().err
+    assert main(["reconstruct", str(keypoints), "--out", str(out), "--camera-name", "cam02"]) == 2
+    assert "--camera-name chooses a camera" in capsys.readouterr().err  # had been ignored
     assert main(["fit", str(keypoints), "--out", str(out), "--variant", "S", "--no-overlay",
                  "--camera", str(calib), "--camera-name", "cam02"]) == 0
     used = np.array(json.loads((out / "config.json").read_text())["camera_K"])

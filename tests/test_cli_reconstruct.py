@@ -125,6 +125,11 @@ def test_flags_make_the_pipeline_config():
     assert default.scene.obstacles == () and default.scene.ground_solref == (0.02, 1.0)
     stiff = pipeline_config(_args("v.mp4", "--out", "o", "--ground-stiffness", "400"))
     assert stiff.scene.ground_stiffness_damping() == pytest.approx((400.0, 40.0))
+    # A friction alone keeps the floor's contact; the trampoline is not given a stiffness.
+    slippery = pipeline_config(_args("v.mp4", "--out", "o", "--ground-friction", "0.3"))
+    assert slippery.scene.ground_solref == default.scene.ground_solref
+    with pytest.raises(PhysposeError, match="--trampoline sets the floor's stiffness"):
+        pipeline_config(_args("v.mp4", "--out", "o", "--trampoline", "--ground-damping", "9"))
     assert default.dynamics.candidates == 1
     assert pipeline_config(_args("v.mp4", "--out", "o", "--candidates", "3")
                            ).dynamics.candidates == 3

@@ -286,7 +286,9 @@ def test_cli_fit_bad_input(tmp_path, capsys):
     qca.write_text("<?xml version='1.0'?>")
     assert main(["fit", str(obs_path), "--out", str(tmp_path / "o"), "--camera",
                  str(qca)]) == 2
-    assert "--camera-name" in capsys.readouterr().err
+    assert "not a readable XML calibration" in capsys.readouterr().err  # fit reads them now
+    assert main(["fit", str(obs_path), "--out", str(tmp_path / "o"), "--height", "175"]) == 2
+    assert "175" in capsys.readouterr().err  # before any work
     assert main(["fit", str(obs_path), "--out", str(tmp_path / "o"), "--slow-motion", "0"]) == 2
     assert "slow motion 0x is outside" in capsys.readouterr().err
 

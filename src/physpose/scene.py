@@ -109,12 +109,16 @@ class SceneConfig:
         """A copy with direct ground stiffness (1/s^2) and/or damping (1/s), or friction.
 
         Giving only one of stiffness/damping keeps the other at the value that matches the
-        current floor (critically damped for the default floor).
+        current floor (critically damped for the default floor); giving neither keeps the
+        floor's contact as it is.
         """
         for name, v in (("stiffness", stiffness), ("damping", damping)):
             if v is not None and not (math.isfinite(v) and v > 0):
                 raise PhysposeError(f"ground {name} {v} must be positive",
                                     remedy=f"give --ground-{name} as a positive number")
+        if stiffness is None and damping is None:
+            return self if friction is None else dataclasses.replace(
+                self, ground_friction=float(friction))
         k, d = self.ground_stiffness_damping()
         k = k if stiffness is None else float(stiffness)
         d = (2.0 * math.sqrt(k) if stiffness is not None else d) if damping is None \
@@ -124,12 +128,15 @@ class SceneConfig:
             ground_friction=self.ground_friction if friction is None else float(friction))
 
     def ground_stiffness_damping(self) -> tuple[float, float]:
-        """The ground's (stiffness 1/s^2, damping 1/s) in MuJoCo's direct form."""
+        """The ground's (stiffness 1/s^2, damping 1/s) in MuJoCo's direct form: the solref
+        (-stiffness, -damping) that makes the same contact. MuJoCo divides both forms by the
+        impedance dmax alike (stiffness by dmax^2, damping by dmax), so (timeconst,
+        dampratio) is (1 / (timeconst dampratio)^2, 2 / timeconst); with dmax folded in as
+        well, a floor given only a friction had come out 1/dmax^2 stiffer."""
         a, b = self.ground_solref
         if a < 0:
             return -a, -b
-        dmax = self.ground_solimp[1]
-        return 1.0 / (dmax * dmax * a * a * b * b), 2.0 / (dmax * a)
+        return 1.0 / (a * a * b * b), 2.0 / a
 
 
 def trampoline(base: SceneConfig = SceneConfig()) -> SceneConfig:

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import dataclasses
 from pathlib import Path
 
 from physpose.body import BodyConfig, build_body, standing_qpos
@@ -35,7 +34,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="ground damping, MuJoCo direct solref units (1/s); default: "
                         "critical for the stiffness")
     p.add_argument("--trampoline", action="store_true",
-                   help="a soft, springy floor that bounces (overrides stiffness/damping)")
+                   help="a soft, springy floor that bounces (stiffness 150, damping 1.5; not "
+                        "with --ground-stiffness/--ground-damping)")
     p.add_argument("--obstacle", action="append", default=[], metavar="box:x,y,z,sx,sy,sz[,yaw]",
                    help="a box in world coordinates: centre and full sizes in metres, "
                         "optional yaw in degrees (repeatable)")
@@ -46,7 +46,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def scene_from_args(args: argparse.Namespace) -> SceneConfig:
-    """The SceneConfig the command-line options describe."""
+    """The SceneConfig the ground and obstacle options describe (`physpose body` and
+    `physpose reconstruct`)."""
     obstacles = []
     for i, text in enumerate(args.obstacle):
         try:
@@ -54,13 +55,22 @@ def scene_from_args(args: argparse.Namespace) -> SceneConfig:
         except PhysposeError as err:
             raise PhysposeError(f"--obstacle #{i + 1}: {err.problem}", remedy=err.remedy) from None
     scene = SceneConfig(obstacles=tuple(obstacles))
+    direct = args.ground_stiffness is not None or args.ground_damping is not None
+    if args.trampoline and direct:
+        raise PhysposeError("--trampoline sets the floor's stiffness and damping itself",
+                            remedy="give either --trampoline or --ground-stiffness/"
+                                   "--ground-damping")
     if args.trampoline:
         scene = trampoline(scene)
-    elif args.ground_stiffness is not None or args.ground_damping is not None:
-        scene = scene.with_ground(stiffness=args.ground_stiffness, damping=args.ground_damping)
-    if args.ground_friction is not None:
-        scene = dataclasses.replace(scene, ground_friction=args.ground_friction)
-    return scene
+    return scene.with_ground(args.ground_stiffness, args.ground_damping, args.ground_friction)
+
+
+def check_person(height: float | None, mass: float | None) -> None:
+    """Range checks of --height/--mass before any heavy work (reconstruct, fit)."""
+    if mass is not None and height is None:
+        BodyShape.from_height(1.75, mass)
+    elif height is not None:
+        BodyShape.from_height(height, mass)
 
 
 def _check_range(option: str, value: float | None, bounds: tuple[float, float], unit: str,

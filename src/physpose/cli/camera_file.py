@@ -34,6 +34,18 @@ def read_intrinsics(path: Path) -> np.ndarray:
     return check_intrinsics(K.reshape(3, 3) if K.size == 9 else K, str(path))
 
 
+def given_intrinsics(path: Path | None, name: str | None, video: Path,
+                     image_size: tuple[int, int] | None) -> np.ndarray | None:
+    """K (3, 3) of --camera (and --camera-name), None without --camera; --camera-name alone
+    is refused rather than ignored."""
+    if path is None:
+        if name is not None:
+            raise PhysposeError("--camera-name chooses a camera of the --camera calibration",
+                                remedy="give the Qualisys .qca.txt file with --camera")
+        return None
+    return camera_intrinsics(path, name, video, image_size)
+
+
 def camera_intrinsics(path: Path, name: str | None, video: Path,
                       image_size: tuple[int, int] | None) -> np.ndarray:
     """K (3, 3) from a Qualisys .qca.txt (one camera of it, scaled to the input's image_size)

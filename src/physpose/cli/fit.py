@@ -11,10 +11,10 @@ import time
 from pathlib import Path
 
 from physpose import __version__
-from physpose.cli.camera_file import camera_intrinsics
+from physpose.cli.body import check_person
+from physpose.cli.camera_file import given_intrinsics
 from physpose.cli.observe import add_video_options, config_from_args, refuse_video_options
 from physpose.diagnostics import camera_pose_message, rate_message
-from physpose.errors import PhysposeError
 from physpose.keypoints_io import is_keypoints_file, load_keypoints
 from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
 from physpose.kinematics.fit import fit_kinematics, stderr_log
@@ -69,15 +69,12 @@ def _run(args: argparse.Namespace) -> int:
     if is_keypoints_file(args.input):
         refuse_video_options(observe_cfg, args.input)
     check_slow_motion(args.slow_motion)
+    check_person(args.height, args.mass)
     check_output_folder(args.out)
-    K = None  # read before the work
-    if args.camera is not None:
-        image_size = (load_keypoints(args.input) if is_keypoints_file(args.input)
-                      else probe(args.input)).image_size
-        K = camera_intrinsics(args.camera, args.camera_name, args.input, image_size)
-    elif args.camera_name is not None:
-        raise PhysposeError("--camera-name chooses a camera of the --camera calibration",
-                            remedy="give the Qualisys .qca.txt file with --camera")
+    image_size = None if args.camera is None else (
+        load_keypoints(args.input) if is_keypoints_file(args.input) else probe(args.input)
+    ).image_size
+    K = given_intrinsics(args.camera, args.camera_name, args.input, image_size)  # before the work
     obs = load_observations(args.input, footage_observe(observe_cfg, args.slow_motion),
                             progress=sys.stderr.isatty()).on_real_clock(args.slow_motion)
     rate = rate_message(obs.fps)

@@ -16,7 +16,8 @@ from physpose.dynamics import PRESETS
 from physpose.dynamics.config import available_cores
 from physpose.dynamics.objective import TERMS, ObjectiveWeights
 from physpose.dynamics.travel import CAMERA_SETTINGS
-from physpose.cli.camera_file import camera_intrinsics
+from physpose.cli.body import check_person, scene_from_args
+from physpose.cli.camera_file import given_intrinsics
 from physpose.cli.observe import (PERSON_HELP, STATIC_CAMERA_HELP, image_point,
                                   refuse_video_options)
 from physpose.errors import PhysposeError
@@ -28,7 +29,6 @@ from physpose.paths import check_output_folder
 from physpose.pipeline import CONFIG_FILE, RECONSTRUCTION_FILE, PipelineConfig
 from physpose.reconstruction import Reconstruction
 from physpose.report.data import forces_summary, slow_motion_note, video_span
-from physpose.scene import SceneConfig, parse_obstacle, trampoline
 
 _OUTPUT_NAMES = {"metrics": "metrics", "report": "report (open in a browser)",
                  "overlay": "overlay video", "overlay_png": "overlay frame",
@@ -139,7 +139,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--ground-friction", type=float, metavar="MU",
                    help="sliding friction of the ground (default 0.9)")
     g.add_argument("--ground-stiffness", type=float, metavar="K",
-                   help="ground stiffness, 1/s^2 per unit mass (default: a hard floor)")
+                   help="ground stiffness, MuJoCo direct solref units (1/s^2 per unit mass; "
+                        "default: a hard floor)")
     g.add_argument("--ground-damping", type=float, metavar="D",
                    help="ground damping, 1/s (default: critical for the stiffness)")
     g.add_argument("--auto-support", action=argparse.BooleanOptionalAction, default=True,
@@ -147,7 +148,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "put a box under them, and where the person sits, a seat (default on; "
                         "--no-auto-support: none, and the simulated body falls there)")
     g.add_argument("--trampoline", action="store_true",
-                   help="a soft, springy floor (stiffness 150, damping 1.5)")
+                   help="a soft, springy floor (stiffness 150, damping 1.5; not with "
+                        "--ground-stiffness/--ground-damping)")
     g.add_argument("--obstacle", action="append", default=[], metavar="box:x,y,z,sx,sy,sz[,yaw]",
                    help="a box in the world (centre and full sizes in m, yaw in degrees; "
                         "repeatable), e.g. a chair seat box:-0.35,0,0.225,0.45,0.45,0.45")
@@ -174,16 +176,6 @@ def parse_formats(text: str) -> tuple[str, ...]:
                             remedy=f"give --export as a comma-separated list of "
                                    f"{', '.join(FORMATS)} (or none)")
     return names
-
-
-def scene_config(args: argparse.Namespace) -> SceneConfig:
-    """The scene of the ground/obstacle flags."""
-    scene = trampoline() if args.trampoline else SceneConfig()
-    if (args.ground_stiffness, args.ground_damping, args.ground_friction) != (None,) * 3:
-        scene = scene.with_ground(args.ground_stiffness, args.ground_damping,
-                                  args.ground_friction)
-    obstacles = tuple(parse_obstacle(text) for text in args.obstacle)
-    return dataclasses.replace(scene, obstacles=obstacles) if obstacles else scene
 
 
 def parse_weights(texts: list[str], weights: ObjectiveWeights) -> ObjectiveWeights:
@@ -249,7 +241,7 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))
     return dataclasses.replace(config, observe=observe, dynamics=dynamics,
-                               scene=scene_config(args), auto_support=args.auto_support,
+                               scene=scene_from_args(args), auto_support=args.auto_support,
                                slow_motion=1.0 if args.slow_motion is None else args.slow_motion)
 
 
@@ -267,16 +259,6 @@ def check_input(video: Path, config: PipelineConfig) -> tuple[int, int]:
     observe = config.footage_observe()
     videolib.plan_frames(info, observe.target_fps, observe.start, observe.end)
     return info.image_size
-
-
-def check_person(height: float | None, mass: float | None) -> None:
-    """Range checks of --height/--mass before any heavy work."""
-    from physpose.shape import BodyShape  # noqa: PLC0415
-
-    if mass is not None and height is None:
-        BodyShape.from_height(1.75, mass)
-    elif height is not None:
-        BodyShape.from_height(height, mass)
 
 
 def restarts_line(recon: Reconstruction) -> str:
@@ -362,8 +344,7 @@ def run(args: argparse.Namespace) -> int:
     image_size = check_input(args.video, config)
     check_person(args.height, args.mass)
     check_output_folder(args.out)
-    K = None if args.camera is None else camera_intrinsics(args.camera, args.camera_name,
-                                                           args.video, image_size)
+    K = given_intrinsics(args.camera, args.camera_name, args.video, image_size)
     timings: dict[str, float] = {}
     clock = time.perf_counter()
     obs = load_input(args.video, config, K)
