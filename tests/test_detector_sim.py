@@ -219,9 +219,13 @@ def test_far_side_landmarks_are_less_confident():
     clip = walking_clip()
     cfg = dataclasses.replace(NOISELESS, azimuth_deg=90.0)   # camera at the subject's left
     conf = simulate_detections(clip, cfg).observations.keypoints2d[..., 2]
-    for part in ("shoulder", "elbow", "knee", "ankle"):
-        assert conf[:, LANDMARK_INDEX[f"right_{part}"]].mean() < \
-            conf[:, LANDMARK_INDEX[f"left_{part}"]].mean() - 0.2
+    def mean(side: str, part: str) -> float:
+        return float(conf[:, LANDMARK_INDEX[f"{side}_{part}"]].mean())
+
+    for part in ("elbow", "knee", "ankle"):   # limbs: 0.2-0.4 m apart in depth
+        assert mean("right", part) < mean("left", part) - 0.5 * cfg.far_side_drop
+    for part in ("shoulder", "hip"):          # trunk: MediaPipe's confidence saturates there
+        assert mean("right", part) == pytest.approx(mean("left", part), abs=0.02)
 
 
 def test_landmarks_behind_the_torso_are_less_confident():
