@@ -1,13 +1,19 @@
 # physpose: `make demo` (install + run on the built-in clip), `make test` (install + tests).
 SHELL := /bin/bash
-# uv from PATH, else the copy `pip install uv` puts beside python3 (run as `python3 -m uv`).
-UV := $(or $(shell command -v uv 2>/dev/null),python3 -m uv)
-RUN := $(UV) run --frozen
+# uv from PATH, else a private copy in .tools/ (where an "externally managed" system Python,
+# as Debian's, refuses `pip install`), else the one `pip install uv` put beside python3.
+# Expanded at each use (=, not :=), so the recipes after `uv` see what it installed.
+UV = $(shell command -v uv 2>/dev/null || { [ -x .tools/bin/uv ] && echo .tools/bin/uv; } \
+       || echo python3 -m uv)
+RUN = $(UV) run --frozen
 
 .PHONY: setup uv web data demo test test-fast bench clean
 
 uv:
-	@$(UV) --version >/dev/null 2>&1 || python3 -m pip install --quiet "uv>=0.5"
+	@$(UV) --version >/dev/null 2>&1 || python3 -m pip install --quiet "uv>=0.5" 2>/dev/null \
+	  || { python3 -m venv .tools && .tools/bin/pip install --quiet "uv>=0.5"; } \
+	  || { echo "cannot install uv: install it (https://docs.astral.sh/uv/) or Python's venv" \
+	            "module (Debian: apt install python3-venv), then run make again" >&2; exit 1; }
 
 setup: uv web
 	$(UV) sync --frozen
@@ -35,4 +41,4 @@ bench: setup
 	$(RUN) physpose benchmark --out out/benchmark
 
 clean:
-	rm -rf out .cache
+	rm -rf out .cache .tools
