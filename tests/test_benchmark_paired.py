@@ -112,6 +112,8 @@ def test_compare_errors_name_the_file_and_the_remedy(tmp_path, capsys):
     assert str(run) in err and "choose from: base, new" in err
     assert main(["compare", str(tmp_path / "missing"), "--base", "base"]) == 2
     assert "benchmark results not found" in capsys.readouterr().err
+    assert main(["compare", str(run), "--base", "base", "--out", str(tmp_path)]) == 2
+    assert "--out is a folder; it names the file to write" in capsys.readouterr().err
     junk = tmp_path / "junk.json"
     junk.write_text("{not json")
     assert main(["compare", str(junk), "--base", "base"]) == 2

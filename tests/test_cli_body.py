@@ -49,7 +49,7 @@ def test_png(tmp_path):
     (["--height", "1.7", "--ground-friction", "-1"], "--ground-friction"),
     (["--height", "1.7", "--ground-stiffness", "0"], "stiffness"),
     (["--height", "1.7", "--ground-friction", "nan"], "--ground-friction nan is not"),
-    (["--height", "1.7", "--png", "body.txt"], "--png body.txt does not end in .png"),
+    (["--height", "1.7", "--png", "body.txt"], "--png does not end in .png"),
 ])
 def test_errors_name_the_argument(tmp_path, capsys, args, message):
     assert main(["body", *args, "--out", str(tmp_path / "b.xml")]) == 2
@@ -59,13 +59,15 @@ def test_errors_name_the_argument(tmp_path, capsys, args, message):
 
 
 def test_an_output_path_the_file_system_refuses_is_an_error_not_a_traceback(tmp_path, capsys):
-    """Any command: an --out below a plain file names that file and exits 2."""
+    """An --out below a plain file, or naming a folder, is refused before the work, naming
+    the path (it had been the file system's bare "Is a directory")."""
     blocker = tmp_path / "a_file"
     blocker.write_text("")
     assert main(["body", "--height", "1.7", "--out", str(blocker / "b.xml")]) == 2
     err = capsys.readouterr().err
-    assert f"{blocker}:" in err and "check that the path exists" in err
-    assert "Traceback" not in err
+    assert f"{blocker} is a file" in err and "Traceback" not in err
+    assert main(["body", "--height", "1.7", "--out", str(tmp_path)]) == 2
+    assert "--out is a folder; it names the file to write" in capsys.readouterr().err
 
 
 def _raising(exc):

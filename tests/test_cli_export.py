@@ -78,6 +78,8 @@ def test_report(results, capsys):
     (["overlay", "{physics}", "--video", "{missing}/v.mp4"], "file not found"),
     (["overlay", "{physics}", "--png-frame", "99"], "outside the result"),
     (["overlay", "{physics}", "--out", "{empty}"], "--out is a folder"),
+    (["report", "{physics}", "--out", "{empty}"], "--out is a folder"),
+    (["report", "{physics}", "--out", "{empty}/r.txt"], "--out does not end in .html"),
     (["overlay", "{physics}", "--out", "{empty}/o.txt"], "--out does not end in .mp4"),
     (["overlay", "{physics}", "--png-frame", "0", "--out", "{empty}/o.mp4"],
      "--out does not end in .png"),

@@ -59,6 +59,27 @@ def check_output_folder(path: str | Path, option: str = "--out") -> Path:
     return path
 
 
+def check_output_file(path: str | Path, suffix: str | None = None, option: str = "--out"
+                      ) -> Path:
+    """Refuse, before the work, an output file that could not be written: a folder, a path
+    under a file or an unwritable folder, or (with `suffix`) another kind of file."""
+    path = Path(path)
+    if path.is_dir():
+        raise PhysposeError(f"{option} is a folder; it names the file to write", path=path,
+                            remedy=f"pass a file name{f' ending in {suffix}' if suffix else ''}")
+    if suffix is not None and path.suffix.lower() != suffix:
+        raise PhysposeError(f"{option} does not end in {suffix}", path=path,
+                            remedy=f"pass a file name ending in {suffix}")
+    existing = next(p for p in path.absolute().parents if p.exists())
+    if not existing.is_dir():
+        raise PhysposeError(f"{option} cannot be written: {existing} is a file", path=path,
+                            remedy="pass a file path in a folder")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise PhysposeError(f"cannot write into {existing}", path=path,
+                            remedy=f"pass a file in a folder you may write to for {option}")
+    return path
+
+
 @contextlib.contextmanager
 def output_folder(path: str | Path) -> Iterator[Path]:
     """Make the output folder for the work inside the block. If the work fails, the folders

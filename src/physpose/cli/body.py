@@ -7,6 +7,7 @@ from pathlib import Path
 
 from physpose.body import BodyConfig, build_body, standing_qpos
 from physpose.errors import PhysposeError
+from physpose.paths import check_output_file
 from physpose.scene import SceneConfig, parse_obstacle, trampoline
 from physpose.shape import BUILD_BMI, HEIGHT_RANGE, MASS_RANGE, SEXES, BodyShape
 
@@ -87,9 +88,9 @@ def _run(args: argparse.Namespace) -> int:
         raise PhysposeError(f"--ground-friction {args.ground_friction:g} is not a coefficient "
                             ">= 0",
                             remedy="give a friction coefficient >= 0, e.g. 0.9")
-    if args.png is not None and args.png.suffix.lower() != ".png":
-        raise PhysposeError(f"--png {args.png} does not end in .png",
-                            remedy="name the picture with .png, e.g. --png body.png")
+    check_output_file(args.out)
+    if args.png is not None:
+        check_output_file(args.png, ".png", "--png")
     shape = BodyShape.from_height(args.height, args.mass, build=args.build, sex=args.sex)
     body = build_body(shape, scene_from_args(args), BodyConfig())
     args.out.parent.mkdir(parents=True, exist_ok=True)

@@ -12,6 +12,7 @@ from physpose.benchmark.paired import (load_results, merge_results, paired_diffe
 from physpose.benchmark.report import render_paired
 from physpose.benchmark.scoring import TRUTH_ROW
 from physpose.errors import PhysposeError
+from physpose.paths import check_output_file
 from physpose.json_text import strict_json
 
 
@@ -53,6 +54,8 @@ def run(args: argparse.Namespace) -> int:
                             "or in the results",
                             remedy="name another variant with --variant, or add the results.json "
                                    "of a run with one")
+    if args.out is not None:
+        check_output_file(args.out)
     configs = {json.dumps(doc.get("config", {}).get("material"), sort_keys=True) for doc in docs}
     if len(configs) > 1:
         print("physpose compare: note: the runs prepared their material differently (seed, "

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from physpose.errors import PhysposeError, about
 from physpose.export import DEFAULT_NAMES, FORMATS, export
+from physpose.paths import check_output_file
 from physpose.reconstruction import Reconstruction
 from physpose.render.result import MOTIONS
 
@@ -72,6 +73,8 @@ def _run_export(args: argparse.Namespace) -> int:
 def _run_report(args: argparse.Namespace) -> int:
     from physpose.report import build_report
 
+    if args.out is not None:
+        check_output_file(args.out, ".html")
     with about(Reconstruction.file_in(args.result)):
         print(build_report(args.result, args.out))
     return 0
@@ -81,7 +84,7 @@ def _run_overlay(args: argparse.Namespace) -> int:
     from physpose.render.overlay import render_overlay, save_overlay_png
 
     if args.out is not None:
-        _check_file_out(args.out, ".png" if args.png_frame is not None else ".mp4")
+        check_output_file(args.out, ".png" if args.png_frame is not None else ".mp4")
     with about(Reconstruction.file_in(args.result)):
         if args.png_frame is not None:
             out = args.out if args.out is not None else \
@@ -91,13 +94,3 @@ def _run_overlay(args: argparse.Namespace) -> int:
         made = render_overlay(args.result, args.out, video=args.video, progress=True)
     print(f"{made.path} (drawn on {made.background})")
     return 0
-
-
-def _check_file_out(out: Path, suffix: str) -> None:
-    """--out names a file of the kind written (checked before the frames are drawn)."""
-    if out.is_dir():
-        raise PhysposeError("--out is a folder; it names the file to write", path=out,
-                            remedy=f"pass a file name ending in {suffix}")
-    if out.suffix.lower() != suffix:
-        raise PhysposeError(f"--out does not end in {suffix}", path=out,
-                            remedy=f"pass a file name ending in {suffix}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -198,6 +199,12 @@ def parse_weights(texts: list[str], weights: ObjectiveWeights) -> ObjectiveWeigh
     return weights
 
 
+def _check_option(ok: bool, option: str, value: float, need: str, remedy: str) -> None:
+    """Refuse a flag's value, naming the flag, unless ok."""
+    if not ok:
+        raise PhysposeError(f"{option} {value} must be {need}", remedy=remedy)
+
+
 def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     """The composed config of the flags (validated, before any heavy work)."""
     config = PipelineConfig.preset(args.preset)
@@ -208,14 +215,19 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                                   stabilize=not args.static_camera)
     dynamics = config.dynamics
     if args.candidates is not None:
+        _check_option(args.candidates >= 1, "--candidates", args.candidates, ">= 1",
+                      "pass how many whole-clip runs to keep the best of, e.g. --candidates 3 "
+                      "(the default is 1)")
         dynamics = dataclasses.replace(dynamics, candidates=args.candidates)
     if args.searches is not None:
+        _check_option(args.searches >= 1, "--searches", args.searches, ">= 1",
+                      "pass how many CMA-ES searches to average per window, e.g. --searches 2, "
+                      "or leave it out for the preset's")
         dynamics = dataclasses.replace(dynamics, searches=args.searches)
     if args.threads is not None:
-        if args.threads < 1:
-            raise PhysposeError(f"--threads {args.threads} must be >= 1",
-                                remedy="pass a number of threads, e.g. --threads 2, or leave "
-                                       f"it out to use every core ({available_cores()} here)")
+        _check_option(args.threads >= 1, "--threads", args.threads, ">= 1",
+                      "pass a number of threads, e.g. --threads 2, or leave it out to use "
+                      f"every core ({available_cores()} here)")
         dynamics = dataclasses.replace(dynamics, nthread=args.threads)
     if args.weight:
         dynamics = dataclasses.replace(dynamics, weights=parse_weights(args.weight,
@@ -225,19 +237,19 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     if args.camera_travel is not None:
         dynamics = dataclasses.replace(dynamics, camera=args.camera_travel)
     if args.refine is not None:
-        if args.refine < 0:
-            raise PhysposeError(f"--refine {args.refine} must be >= 0",
-                                remedy="pass a number of iLQR iterations, e.g. --refine 6, or "
-                                       "--refine 0 to switch the refinement off")
+        _check_option(args.refine >= 0, "--refine", args.refine, ">= 0",
+                      "pass a number of iLQR iterations, e.g. --refine 6, or --refine 0 to "
+                      "switch the refinement off")
         dynamics = dataclasses.replace(dynamics, refine=dataclasses.replace(
             dynamics.refine, iterations=args.refine))
     if args.restart_distance is not None:
-        if not args.restart_distance > 0:
-            raise PhysposeError(f"--restart-distance {args.restart_distance} must be > 0",
-                                remedy="pass metres, e.g. --restart-distance 0.25 (the "
-                                       "default is 0.15)")
+        _check_option(args.restart_distance > 0, "--restart-distance", args.restart_distance,
+                      "> 0", "pass metres, e.g. --restart-distance 0.25 (the default is 0.15)")
         dynamics = dataclasses.replace(dynamics, reset_distance=args.restart_distance)
     if args.balance_hz is not None:
+        _check_option(math.isfinite(args.balance_hz) and args.balance_hz >= 0, "--balance-hz",
+                      args.balance_hz, ">= 0", "pass a frequency in Hz, e.g. --balance-hz 0.5, "
+                      "or 0 (the default) for no balance feedback")
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))
     return dataclasses.replace(config, observe=observe, dynamics=dynamics,
