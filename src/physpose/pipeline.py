@@ -77,6 +77,13 @@ class PipelineConfig:
         `slow_motion` times more sparsely, so that the analysis rate holds in real time."""
         return footage_observe(self.observe, self.slow_motion)
 
+    def without_cache(self) -> PipelineConfig:
+        """The same settings with the observe and kinematic stages computed afresh, not read
+        from the stage cache (the dynamics' windows are reused or not by `resume`)."""
+        return dataclasses.replace(
+            self, observe=dataclasses.replace(self.observe, use_cache=False),
+            kinematics=dataclasses.replace(self.kinematics, use_cache=False))
+
     @classmethod
     def preset(cls, name: str = "fast", **changes) -> PipelineConfig:
         """``fast`` (default budgets) or ``paper`` (the paper's CMA-ES budget), with overrides."""

@@ -68,7 +68,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with two or more variants, the one the others are compared with clip "
                         "by clip (mean +- standard error of the per-clip differences; default: "
                         "the first --variant). `physpose compare` does the same across runs")
-    p.add_argument("--out", type=Path, help="output folder for results.json and results.md")
+    p.add_argument("--out", type=Path, help="output folder for results.json and results.md "
+                                           "(required, but for --variant list)")
     p.set_defaults(func=run)
 
 

@@ -23,7 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mass", type=float, help="body mass, kg (20-300; default: from the "
                                               "height at the build's BMI)")
     p.add_argument("--build", choices=tuple(BUILD_BMI), default="average",
-                   help="build used to estimate the mass (BMI %s)" % BUILD_BMI)
+                   help="build used to estimate the mass (BMI: " + ", ".join(
+                       f"{name} {bmi:g}" for name, bmi in BUILD_BMI.items()) + ")")
     p.add_argument("--sex", choices=SEXES, default="neutral",
                    help="column of the segment-mass table (de Leva 1996)")
     p.add_argument("--ground-friction", type=float, help="ground friction coefficient "

@@ -24,7 +24,8 @@ def register(sub: argparse._SubParsersAction) -> None:
         description="Fetch the pose2sim demo clip if needed and run the whole pipeline (fast "
                     "preset) on its first view: observe, kinematic fit, body, physics "
                     "optimisation, then metrics, report.html, overlay.mp4 and the exports "
-                    "(BVH, glTF, CSV) in --out. Takes a few minutes on 2 cores.")
+                    "(BVH, glTF, joints and forces CSV) and overlay.png in --out. Takes a "
+                    "few minutes on 2 cores.")
     p.add_argument("--out", type=Path, default=Path("out/demo"), metavar="DIR",
                    help="output folder (default: out/demo)")
     p.add_argument("--no-cache", action="store_true",
@@ -44,8 +45,6 @@ def _kinematic_only(obs, config: PipelineConfig, out: Path):
 
 
 def _run(args: argparse.Namespace) -> int:
-    import dataclasses  # noqa: PLC0415
-
     from physpose.pipeline import reconstruct  # noqa: PLC0415 (heavy imports)
 
     start = time.perf_counter()
@@ -54,9 +53,7 @@ def _run(args: argparse.Namespace) -> int:
     print(f"demo input: {video}", flush=True)
     config = PipelineConfig.preset("fast")
     if args.no_cache:
-        config = dataclasses.replace(
-            config, observe=dataclasses.replace(config.observe, use_cache=False),
-            kinematics=dataclasses.replace(config.kinematics, use_cache=False))
+        config = config.without_cache()
     timings: dict[str, float] = {}
     clock = time.perf_counter()
     obs = load_input(video, config, None)

@@ -60,7 +60,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", "-o", type=Path, default=None,
                    help="output file (default: RESULT_DIR/overlay.mp4)")
     p.add_argument("--png-frame", type=int, default=None, metavar="FRAME",
-                   help="write only this frame (0-based) as a PNG to --out instead")
+                   help="write only this frame (0-based) as a PNG instead: to --out, else "
+                        "to RESULT_DIR/overlay_FRAME.png")
     p.set_defaults(func=_run_overlay)
 
 

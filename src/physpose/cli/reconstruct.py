@@ -157,7 +157,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     g = p.add_argument_group("outputs")
     g.add_argument("--resume", action=argparse.BooleanOptionalAction, default=True,
                    help="reuse finished optimisation windows of an earlier run in --out "
-                        "(default); --no-resume starts over")
+                        "(default); --no-resume optimises every window again (observe and "
+                        "the kinematic fit still come from the cache: --no-cache)")
+    g.add_argument("--no-cache", action="store_true",
+                   help="recompute every stage: observe and the kinematic fit too, not read "
+                        "from the stage cache, and every window (implies --no-resume)")
     g.add_argument("--no-report", action="store_true", help="skip report.html")
     g.add_argument("--no-overlay", action="store_true", help="skip overlay.mp4 and overlay.png")
     g.add_argument("--export", default=",".join(DEFAULT_FORMATS), metavar="FORMATS",
@@ -252,9 +256,11 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                       "or 0 (the default) for no balance feedback")
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))
-    return dataclasses.replace(config, observe=observe, dynamics=dynamics,
-                               scene=scene_from_args(args), auto_support=args.auto_support,
-                               slow_motion=1.0 if args.slow_motion is None else args.slow_motion)
+    config = dataclasses.replace(config, observe=observe, dynamics=dynamics,
+                                 scene=scene_from_args(args), auto_support=args.auto_support,
+                                 slow_motion=1.0 if args.slow_motion is None else
+                                 args.slow_motion)
+    return config.without_cache() if args.no_cache else config
 
 
 def check_input(video: Path, config: PipelineConfig) -> tuple[int, int]:
@@ -362,7 +368,7 @@ def run(args: argparse.Namespace) -> int:
     obs = load_input(args.video, config, K)
     timings["observe"] = time.perf_counter() - clock
     recon = reconstruct(obs, args.out, config, height=args.height, mass=args.mass,
-                        resume=args.resume, progress=True)
+                        resume=args.resume and not args.no_cache, progress=True)
     timings.update({k: v for k, v in recon.meta.get("timings_s", {}).items()
                     if k != "observe"})
     written, metrics = finish(args.out, formats, report=not args.no_report,

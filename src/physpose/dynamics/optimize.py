@@ -427,8 +427,8 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             arrays = {"coefs": coefs, "next_state": next_state, **steps, **out}
             if folder is not None:
                 checkpoint.save_window(folder, w, arrays, record)
-        else:
-            arrays, record = _with_forces(saved[0]), saved[1]
+        else:  # optimised by an earlier run: its seconds are not this run's
+            arrays, record = _with_forces(saved[0]), dict(saved[1], resumed=True)
         coefs, state = arrays["coefs"], arrays["next_state"]
         # A window that could not keep the body near the estimate hands on a restart from the
         # kinematic state instead of a fall in progress (a jump in the output, recorded):
@@ -469,7 +469,8 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
             - wins[w].start_step for w in range(len(wins))]
     results: list[tuple[dict, dict] | None] = [
         checkpoint.load_window(folder, w) if folder is not None else None for w in range(len(wins))]
-    results = [None if r is None else (_with_forces(r[0]), r[1]) for r in results]
+    results = [None if r is None else (_with_forces(r[0]), dict(r[1], resumed=True))
+               for r in results]
     todo = [w for w in range(len(wins)) if results[w] is None]
     for g in range(0, len(todo), cfg.parallel_windows):
         group = todo[g:g + cfg.parallel_windows]
@@ -605,7 +606,10 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
         shifts = stretch_shifts(outputs["com"], setup.objective.com, restarts)
         outputs = shift_stretches(outputs, restarts, shifts)
     timing["total"] = time.perf_counter() - t0
-    timing["search"] = sum(r["seconds"] for _, _, recs in runs for r in recs)
+    # This run's optimisation; windows resumed from checkpoints took theirs in an earlier one.
+    timing["search"] = sum(r["seconds"] for _, _, recs in runs for r in recs
+                           if not r.get("resumed"))
+    timing["resumed_windows"] = sum(bool(r.get("resumed")) for _, _, recs in runs for r in recs)
     candidates = [dict(row, kept=j == k) for j, row in enumerate(table)] \
         if config.candidates > 1 else []
     return PhysicsResult(
