@@ -45,7 +45,8 @@ def _args(*argv: str):
     (["--height", "9"], "height 9.0 m is outside"),
     (["--candidates", "0"], "--candidates 0 must be >= 1"),
     (["--searches", "-1"], "--searches -1 must be >= 1"),
-    (["--balance-hz", "-1"], "--balance-hz -1.0 must be >= 0"),
+    (["--balance-hz", "-1"], "--balance-hz -1.0 must be a finite number >= 0"),
+    (["--restart-distance", "inf"], "--restart-distance inf must be a finite number > 0"),
     (["--refine", "-2"], "--refine -2 must be >= 0"),
     (["--threads", "0"], "--threads 0 must be >= 1"),
     (["--weight", "com=-1"], "the weight must be a number >= 0"),
@@ -155,7 +156,7 @@ def test_flags_make_the_pipeline_config():
     assert default.dynamics.reset_distance == 0.15
     assert pipeline_config(_args("v.mp4", "--out", "o", "--restart-distance", "0.25")
                            ).dynamics.reset_distance == 0.25
-    with pytest.raises(PhysposeError, match="--restart-distance 0.0 must be > 0"):
+    with pytest.raises(PhysposeError, match="--restart-distance 0.0 must be a finite number > 0"):
         pipeline_config(_args("v.mp4", "--out", "o", "--restart-distance", "0"))
     assert default.dynamics.weights == PRESETS["fast"].weights
     paper = pipeline_config(_args("v.mp4", "--out", "o", "--weight", "com=15",

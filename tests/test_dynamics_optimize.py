@@ -233,7 +233,6 @@ def test_interrupted_run_resumes_to_the_uninterrupted_result(clip, tmp_path, mon
     np.testing.assert_array_equal(resumed.ctrl, whole.ctrl)
     # Its timings count this run's work only (they had added the earlier run's seconds).
     assert [bool(r.get("resumed")) for r in resumed.windows[:2]] == [True, True]
-    assert resumed.timings["resumed_windows"] == 2 and whole.timings["resumed_windows"] == 0
     assert resumed.timings["search"] == pytest.approx(
         sum(r["seconds"] for r in resumed.windows[2:]))
     for key in ("grf", "cop", "torques"):

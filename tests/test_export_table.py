@@ -140,6 +140,11 @@ def test_tables_mark_the_frames_not_to_trust(tmp_path):
     marked = rec.replace(keypoints2d=kp, meta={
         **rec.meta, "dynamics": {**(rec.meta.get("dynamics") or {}), "restarts": [5]},
         "diagnostics": {"invalid_windows": [[6, 7]]}})
+    # Results before stop 75 say nothing else: the frames with confidences count as detected.
+    assert marked.detected.tolist() == [True, True, False, False, True, True, True, True]
+    # Frame 1 filled across a short gap at observe time: confidences, but not detected.
+    marked = marked.replace(meta={**marked.meta, "detected": [True, False, False, False,
+                                                               True, True, True, True]})
     folder = tmp_path / "marked"
     folder.mkdir()
     marked.save(folder / "reconstruction.npz")
@@ -147,21 +152,27 @@ def test_tables_mark_the_frames_not_to_trust(tmp_path):
         rows = [r for r in csv.DictReader(f) if r["joint"] == rec.joint_names[0]]
     by_motion = {m: [r for r in rows if r["motion"] == m] for m in ("kinematic", "physics")}
     for motion_rows in by_motion.values():
-        assert [r["detected"] for r in motion_rows] == list("11001111")
+        assert [r["detected"] for r in motion_rows] == list("10001111")
     assert [r["physics_restart"] for r in by_motion["physics"]] == list("00000100")
     assert [r["physics_invalid"] for r in by_motion["physics"]] == list("00000011")
     assert {r["physics_restart"] for r in by_motion["kinematic"]} == {""}
     doc = json.loads(export(folder, "json").read_text())
-    assert doc["detected"] == [True, True, False, False, True, True, True, True]
+    assert doc["detected"] == [True, False, False, False, True, True, True, True]
     assert doc["physics_restart"] == [f == 5 for f in range(8)]
     assert doc["physics_invalid"] == [f >= 6 for f in range(8)]
     with export(folder, "forces").open() as f:
         rows = list(csv.DictReader(f))
     assert [r["physics_restart"] for r in rows] == list("00000100")
-    assert [r["detected"] for r in rows] == list("11001111")
+    assert [r["detected"] for r in rows] == list("10001111")
     kinematic = json.loads(export(save_result(tmp_path / "kin", num_frames=3, physics=False),
                                   "json").read_text())
     assert kinematic["detected"] == [True] * 3 and kinematic["physics_restart"] is None
+    # A physics result that does not record its invalid windows leaves the cells empty.
+    unknown = marked.replace(meta={**marked.meta, "diagnostics": {}})
+    (tmp_path / "unknown").mkdir()
+    unknown.save(tmp_path / "unknown" / "reconstruction.npz")
+    with export(tmp_path / "unknown", "forces").open() as f:
+        assert {r["physics_invalid"] for r in csv.DictReader(f)} == {""}
 
 
 def test_forces_need_a_physics_result(tmp_path):

@@ -155,6 +155,16 @@ class Reconstruction:
         return self.keypoints2d[..., 2].max(axis=1) <= 0
 
     @property
+    def detected(self) -> np.ndarray:
+        """(T,) bool: frames in which the detector found the person (meta["detected"]);
+        frames filled across a short gap at observe time, and undetected ones, are False.
+        Results written before physpose recorded it (stop 75): the frames with confidences."""
+        flags = self.meta.get("detected")
+        if flags is None or len(flags) != self.num_frames:
+            return ~self.undetected
+        return np.asarray(flags, dtype=bool)
+
+    @property
     def restart_flags(self) -> np.ndarray:
         """(T,) bool: True at each of `restarts` (the physics motion jumps there)."""
         flags = np.zeros(self.num_frames, dtype=bool)
@@ -162,12 +172,16 @@ class Reconstruction:
         return flags
 
     @property
-    def invalid_physics(self) -> np.ndarray:
+    def invalid_physics(self) -> np.ndarray | None:
         """(T,) bool: frames of dynamics windows in which no simulated sample stayed valid (the
         physics motion there is the least bad fall, not a reconstruction), from meta
-        ["diagnostics"]["invalid_windows"]; all False where not recorded."""
+        ["diagnostics"]["invalid_windows"]; None where not recorded (a result made outside
+        `physpose.pipeline.reconstruct`)."""
+        runs = (self.meta.get("diagnostics") or {}).get("invalid_windows")
+        if runs is None:
+            return None
         flags = np.zeros(self.num_frames, dtype=bool)
-        for first, last in (self.meta.get("diagnostics") or {}).get("invalid_windows") or []:
+        for first, last in runs:
             flags[int(first):int(last) + 1] = True
         return flags
 

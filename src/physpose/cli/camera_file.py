@@ -9,19 +9,16 @@ from pathlib import Path
 import numpy as np
 
 from physpose.errors import PhysposeError
+from physpose.keypoints_io import is_keypoints_file, load_keypoints
 from physpose.kinematics.camera import check_intrinsics
+from physpose.video import probe
 
 
 def read_intrinsics(path: Path) -> np.ndarray:
-    """K (3, 3) from a JSON file ({"K": ...} or the bare matrix) or a text file of 9 numbers."""
+    """K (3, 3) from a JSON file ({"K": ...} or the bare matrix) or a text file of 9 numbers
+    (camera_intrinsics sends a Qualisys calibration elsewhere)."""
     if not path.is_file():
         raise PhysposeError("camera file not found", path=path, remedy="check the path")
-    if path.name.lower().endswith((".qca.txt", ".qca")):
-        raise PhysposeError("a Qualisys calibration holds several cameras; this takes one "
-                            "camera's intrinsics", path=path,
-                            remedy="use `physpose reconstruct --camera FILE --camera-name NAME`, "
-                                   'or write that camera\'s {"K": [[fx, 0, cx], [0, fy, cy], '
-                                   '[0, 0, 1]]} as JSON')
     try:
         if path.suffix.lower() == ".json":
             doc = json.loads(path.read_text())
@@ -35,22 +32,30 @@ def read_intrinsics(path: Path) -> np.ndarray:
 
 
 def given_intrinsics(path: Path | None, name: str | None, video: Path,
-                     image_size: tuple[int, int] | None) -> np.ndarray | None:
-    """K (3, 3) of --camera (and --camera-name), None without --camera; --camera-name alone
-    is refused rather than ignored."""
+                     image_size: tuple[int, int] | None = None) -> np.ndarray | None:
+    """K (3, 3) of --camera (and --camera-name) for the input `video` (a video or keypoints
+    file; its image size read where a calibration needs it and `image_size` is not given),
+    None without --camera; --camera-name alone is refused rather than ignored."""
     if path is None:
         if name is not None:
             raise PhysposeError("--camera-name chooses a camera of the --camera calibration",
                                 remedy="give the Qualisys .qca.txt file with --camera")
         return None
+    if image_size is None and _is_qualisys(path):
+        image_size = (load_keypoints(video) if is_keypoints_file(video) else probe(video)
+                      ).image_size
     return camera_intrinsics(path, name, video, image_size)
+
+
+def _is_qualisys(path: Path) -> bool:
+    return path.name.lower().endswith((".qca.txt", ".qca"))
 
 
 def camera_intrinsics(path: Path, name: str | None, video: Path,
                       image_size: tuple[int, int] | None) -> np.ndarray:
     """K (3, 3) from a Qualisys .qca.txt (one camera of it, scaled to the input's image_size)
     or a JSON/text intrinsics file; `video` is the input (its name may name the camera)."""
-    if not path.name.lower().endswith((".qca.txt", ".qca")):
+    if not _is_qualisys(path):
         if name is not None:
             raise PhysposeError("--camera-name applies to a Qualisys .qca.txt calibration",
                                 path=path, remedy="drop --camera-name")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from physpose.errors import PhysposeError, about
+from physpose.errors import about
 from physpose.export import DEFAULT_NAMES, FORMATS, export
 from physpose.paths import check_output_file
 from physpose.reconstruction import Reconstruction

@@ -15,14 +15,13 @@ from physpose.cli.body import check_person
 from physpose.cli.camera_file import given_intrinsics
 from physpose.cli.observe import add_video_options, config_from_args, refuse_video_options
 from physpose.diagnostics import camera_pose_message, rate_message
-from physpose.keypoints_io import is_keypoints_file, load_keypoints
+from physpose.keypoints_io import is_keypoints_file
 from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
 from physpose.kinematics.fit import fit_kinematics, stderr_log
 from physpose.metrics import camera_height, camera_tilt
 from physpose.observations import check_slow_motion
 from physpose.observe import footage_observe
 from physpose.paths import check_output_folder
-from physpose.video import probe
 
 RECONSTRUCTION_FILE = "reconstruction.npz"
 CONFIG_FILE = "config.json"
@@ -71,10 +70,7 @@ def _run(args: argparse.Namespace) -> int:
     check_slow_motion(args.slow_motion)
     check_person(args.height, args.mass)
     check_output_folder(args.out)
-    image_size = None if args.camera is None else (
-        load_keypoints(args.input) if is_keypoints_file(args.input) else probe(args.input)
-    ).image_size
-    K = given_intrinsics(args.camera, args.camera_name, args.input, image_size)  # before the work
+    K = given_intrinsics(args.camera, args.camera_name, args.input)  # before the work
     obs = load_observations(args.input, footage_observe(observe_cfg, args.slow_motion),
                             progress=sys.stderr.isatty()).on_real_clock(args.slow_motion)
     rate = rate_message(obs.fps)
@@ -98,6 +94,7 @@ def _run(args: argparse.Namespace) -> int:
                 "input": str(args.input.resolve()), "variant": args.variant,
                 "height": args.height, "mass": args.mass, "slow_motion": args.slow_motion,
                 "camera": None if args.camera is None else str(args.camera.resolve()),
+                "camera_name": args.camera_name,
                 "observe": dataclasses.asdict(observe_cfg),
                 "kinematics": dataclasses.asdict(config),
                 "camera_K": fit.camera_K.tolist(), "losses": fit.losses,

@@ -23,7 +23,7 @@ from physpose.cli.observe import (PERSON_HELP, STATIC_CAMERA_HELP, image_point,
                                   refuse_video_options)
 from physpose.errors import PhysposeError
 from physpose.export import FORMATS
-from physpose.keypoints_io import is_keypoints_file, load_keypoints
+from physpose.keypoints_io import is_keypoints_file
 from physpose.observations import Observations
 from physpose.outputs import DEFAULT_FORMATS, METRICS_FILE, metrics_table, write_outputs
 from physpose.paths import check_output_folder
@@ -247,12 +247,13 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         dynamics = dataclasses.replace(dynamics, refine=dataclasses.replace(
             dynamics.refine, iterations=args.refine))
     if args.restart_distance is not None:
-        _check_option(args.restart_distance > 0, "--restart-distance", args.restart_distance,
-                      "> 0", "pass metres, e.g. --restart-distance 0.25 (the default is 0.15)")
+        _check_option(math.isfinite(args.restart_distance) and args.restart_distance > 0,
+                      "--restart-distance", args.restart_distance, "a finite number > 0",
+                      "pass metres, e.g. --restart-distance 0.25 (the default is 0.15)")
         dynamics = dataclasses.replace(dynamics, reset_distance=args.restart_distance)
     if args.balance_hz is not None:
         _check_option(math.isfinite(args.balance_hz) and args.balance_hz >= 0, "--balance-hz",
-                      args.balance_hz, ">= 0", "pass a frequency in Hz, e.g. --balance-hz 0.5, "
+                      args.balance_hz, "a finite number >= 0", "pass a frequency in Hz, e.g. --balance-hz 0.5, "
                       "or 0 (the default) for no balance feedback")
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))
@@ -263,16 +264,16 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     return config.without_cache() if args.no_cache else config
 
 
-def check_input(video: Path, config: PipelineConfig) -> tuple[int, int]:
+def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:
     """Fail fast on a missing/unreadable video or keypoints file, or a time range outside the
-    video; returns the input's (width, height)."""
+    video; returns the video's (width, height), None for a keypoints file."""
     from physpose import video as videolib  # noqa: PLC0415
 
     if is_keypoints_file(video):
         if not video.is_file():
             raise PhysposeError("keypoints file not found", path=video, remedy="check the path")
         refuse_video_options(config.observe, video)
-        return load_keypoints(video).image_size
+        return None
     info = videolib.probe(video)
     observe = config.footage_observe()
     videolib.plan_frames(info, observe.target_fps, observe.start, observe.end)

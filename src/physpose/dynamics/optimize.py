@@ -609,7 +609,6 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
     # This run's optimisation; windows resumed from checkpoints took theirs in an earlier one.
     timing["search"] = sum(r["seconds"] for _, _, recs in runs for r in recs
                            if not r.get("resumed"))
-    timing["resumed_windows"] = sum(bool(r.get("resumed")) for _, _, recs in runs for r in recs)
     candidates = [dict(row, kept=j == k) for j, row in enumerate(table)] \
         if config.candidates > 1 else []
     return PhysicsResult(

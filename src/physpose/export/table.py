@@ -19,9 +19,10 @@ from physpose.skeleton import DOF_NAMES
 # they came, so tables read by column number before keep their columns.
 VIDEO_COLUMNS = ("video_frame", "video_time")
 # detected: 1 where the detector saw the person, 0 where the motion is inferred from the frames
-# around; physics_restart: 1 where the physics motion restarts from the kinematic estimate (it
-# jumps there); physics_invalid: 1 in windows where no simulated sample stayed valid. The two
-# physics cells are empty on kinematic rows and for results without physics.
+# around (a short gap filled at observe time, or a longer one); physics_restart: 1 where the
+# physics motion restarts from the kinematic estimate (it jumps there); physics_invalid: 1 in
+# windows where no simulated sample stayed valid. The two physics cells are empty on kinematic
+# rows and for results without physics, physics_invalid also where the result does not say.
 FLAG_COLUMNS = ("detected", "physics_restart", "physics_invalid")
 CSV_COLUMNS = ("frame", "time", "motion", "joint", "x", "y", "z", *VIDEO_COLUMNS, *FLAG_COLUMNS)
 _DECIMALS = 6  # metres: micrometre resolution
@@ -31,12 +32,13 @@ def _frame_cells(rec: Reconstruction, physics: bool) -> list[tuple[str, ...]]:
     """Per frame, the VIDEO_COLUMNS and FLAG_COLUMNS cells (empty where the result does not
     record them; the physics flags only for `physics` rows of a result with physics)."""
     frames, times = rec.video_frames, rec.video_times
-    detected = ~rec.undetected
+    detected = rec.detected
     physics = physics and rec.has_physics
     restart, invalid = rec.restart_flags, rec.invalid_physics
     return [("" if frames is None else str(int(frames[t])),
              "" if times is None else f"{times[t]:.6f}", str(int(detected[t])),
-             str(int(restart[t])) if physics else "", str(int(invalid[t])) if physics else "")
+             str(int(restart[t])) if physics else "",
+             str(int(invalid[t])) if physics and invalid is not None else "")
             for t in range(rec.num_frames)]
 
 
@@ -76,9 +78,10 @@ def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) 
         "time": np.round(np.arange(rec.num_frames) / rec.fps, 6).tolist(),
         "video_frames": None if frames is None else frames.tolist(),
         "video_times": None if times is None else np.round(times, 6).tolist(),
-        "detected": (~rec.undetected).tolist(),
+        "detected": rec.detected.tolist(),
         "physics_restart": rec.restart_flags.tolist() if physics else None,
-        "physics_invalid": rec.invalid_physics.tolist() if physics else None,
+        "physics_invalid": None if not physics or rec.invalid_physics is None
+        else rec.invalid_physics.tolist(),
         "motions": {m: np.round(joints_of(rec, m), _DECIMALS).tolist() for m in motions},
     }
     path.write_text(strict_json(doc, separators=(",", ":")))  # a lost joint as null

@@ -49,6 +49,7 @@ class KinematicFit:
                   "frame_indices": None if obs.frame_indices is None
                   else np.asarray(obs.frame_indices).tolist(),
                   "timestamps": np.round(np.asarray(obs.timestamps, dtype=float), 6).tolist(),
+                  "detected": np.asarray(obs.detected, dtype=bool).tolist(),
                   "image_size": [int(v) for v in obs.image_size],
                   "camera_homographies": None if obs.homographies is None
                   else np.round(np.asarray(obs.homographies), 9).tolist(),
