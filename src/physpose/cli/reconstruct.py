@@ -253,8 +253,9 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
         dynamics = dataclasses.replace(dynamics, reset_distance=args.restart_distance)
     if args.balance_hz is not None:
         _check_option(math.isfinite(args.balance_hz) and args.balance_hz >= 0, "--balance-hz",
-                      args.balance_hz, "a finite number >= 0", "pass a frequency in Hz, e.g. --balance-hz 0.5, "
-                      "or 0 (the default) for no balance feedback")
+                      args.balance_hz, "a finite number >= 0",
+                      "pass a frequency in Hz, e.g. --balance-hz 0.5, or 0 (the default) for "
+                      "no balance feedback")
         dynamics = dataclasses.replace(dynamics, balance=dataclasses.replace(
             dynamics.balance, frequency=args.balance_hz))
     config = dataclasses.replace(config, observe=observe, dynamics=dynamics,

@@ -220,9 +220,10 @@ def _exchange(values: np.ndarray, rows: np.ndarray, left: np.ndarray, right: np.
     return out
 
 
-def long_exchanges(ev: Evidence, paths: dict[str, np.ndarray]) -> dict[str, list[np.ndarray]]:
-    """Limb group -> the runs of frames (LONG_EXCHANGE or longer) in which `paths` keep its
-    labels exchanged relative to the trunk's, against the detector's labelling."""
+def long_exchanges(ev: Evidence, paths: dict[str, np.ndarray]) -> dict[str, list[list[int]]]:
+    """Limb group -> the [first, last] frames of each run (LONG_EXCHANGE or longer) in which
+    `paths` keep its labels exchanged relative to the trunk's, against the detector's
+    labelling; groups without such a run are left out."""
     if "trunk" not in paths:
         return {}
     shortest = max(1, math.ceil(LONG_EXCHANGE * ev.fps - 1e-9))
@@ -230,7 +231,9 @@ def long_exchanges(ev: Evidence, paths: dict[str, np.ndarray]) -> dict[str, list
     for name in ATTACH:
         if name in paths:
             runs = _stretches((paths[name] ^ paths["trunk"]) & ev.valid, 1)
-            out[name] = [run for run in runs if run.size >= shortest]
+            long_runs = [[int(run[0]), int(run[-1])] for run in runs if run.size >= shortest]
+            if long_runs:
+                out[name] = long_runs
     return out
 
 
@@ -241,8 +244,6 @@ def unswap(ev: Evidence) -> tuple[Evidence, dict[str, list[list[int]]]]:
     repair lies (bench_swaps), so the user is told (diagnostics.label_exchange_message)."""
     uv, weight, world = ev.uv, ev.weight, ev.world_ray
     paths = swap_paths(ev)
-    long_runs = {name: [[int(run[0]), int(run[-1])] for run in runs]
-                 for name, runs in long_exchanges(ev, paths).items() if runs}
     for name, swapped in paths.items():
         rows = np.flatnonzero(swapped)
         if rows.size:
@@ -250,4 +251,5 @@ def unswap(ev: Evidence) -> tuple[Evidence, dict[str, list[list[int]]]]:
             uv = _exchange(uv, rows, left, right)
             weight = _exchange(weight, rows, left, right)
             world = _exchange(world, rows, left, right)
-    return dataclasses.replace(ev, uv=uv, weight=weight, world_ray=world), long_runs
+    return dataclasses.replace(ev, uv=uv, weight=weight, world_ray=world), \
+        long_exchanges(ev, paths)
