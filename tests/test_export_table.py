@@ -10,6 +10,7 @@ import pytest
 
 from physpose.errors import PhysposeError
 from physpose.export import export
+from physpose.export.gltf import read_glb
 from physpose.export.table import CSV_COLUMNS, forces_columns
 from physpose.reconstruction import Reconstruction
 from physpose.skeleton import DOF_NAMES
@@ -164,6 +165,14 @@ def test_tables_mark_the_frames_not_to_trust(tmp_path):
         rows = list(csv.DictReader(f))
     assert [r["physics_restart"] for r in rows] == list("00000100")
     assert [r["detected"] for r in rows] == list("10001111")
+    # glTF keeps them in its animation's extras (BVH has no place for them).
+    doc, _ = read_glb(export(folder, "glb"))
+    assert doc["animations"][0]["extras"] == {
+        "detected": [True, False, False, False, True, True, True, True],
+        "physics_restart": [f == 5 for f in range(8)],
+        "physics_invalid": [f >= 6 for f in range(8)]}
+    doc, _ = read_glb(export(folder, "glb", out=tmp_path / "k.glb", motion="kinematic"))
+    assert doc["animations"][0]["extras"]["physics_restart"] is None
     kinematic = json.loads(export(save_result(tmp_path / "kin", num_frames=3, physics=False),
                                   "json").read_text())
     assert kinematic["detected"] == [True] * 3 and kinematic["physics_restart"] is None

@@ -8,7 +8,7 @@ from pathlib import Path
 from physpose.errors import PhysposeError, expect_type
 from physpose.export.bvh import write_bvh
 from physpose.export.gltf import write_glb
-from physpose.export.table import write_csv, write_forces_csv, write_json
+from physpose.export.table import frame_flags, write_csv, write_forces_csv, write_json
 from physpose.render.bodymotion import reconstruction_motion
 from physpose.render.result import available_motions, load_result, pick_motion
 
@@ -50,7 +50,9 @@ def export(result_dir: str | Path, fmt: str, out: str | Path | None = None,
         raise PhysposeError(f"this result stores no body model and {which} qpos, which {fmt} "
                             "export needs", path=folder,
                             remedy="export csv or json, or re-run the reconstruction")
-    return (write_bvh if fmt == "bvh" else write_glb)(body, rec.fps, out)
+    if fmt == "bvh":  # BVH has no place for per-frame data: joints.csv carries the flags
+        return write_bvh(body, rec.fps, out)
+    return write_glb(body, rec.fps, out, frame_flags(rec, physics=which == "physics"))
 
 
 def _target(folder: Path, fmt: str, out: str | Path | None) -> Path:

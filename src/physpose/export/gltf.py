@@ -58,8 +58,13 @@ class _Builder:
         return len(self.accessors) - 1
 
 
-def build_gltf(motion: BodyMotion, fps: float) -> tuple[dict, bytes]:
-    """The glTF JSON document and its binary buffer for a body motion at `fps` frames/s."""
+def build_gltf(motion: BodyMotion, fps: float,
+               frame_flags: dict | None = None) -> tuple[dict, bytes]:
+    """The glTF JSON document and its binary buffer for a body motion at `fps` frames/s.
+
+    frame_flags: per-frame lists (name -> one entry per frame, or None) stored as the
+    animation's `extras`, glTF's place for application data: viewers ignore it, scripts read it.
+    """
     tree = motion.tree
     buf = _Builder()
     nodes: list[dict] = [{"name": "world", "rotation": list(Q_WORLD2GLTF), "children": []}]
@@ -118,7 +123,8 @@ def build_gltf(motion: BodyMotion, fps: float) -> tuple[dict, bytes]:
         "asset": {"version": "2.0", "generator": "physpose"},
         "scene": 0, "scenes": [{"name": "physpose", "nodes": [0]}],
         "nodes": nodes, "meshes": meshes, "materials": materials,
-        "animations": [{"name": "motion", "samplers": samplers, "channels": channels}],
+        "animations": [{"name": "motion", "samplers": samplers, "channels": channels,
+                        **({"extras": frame_flags} if frame_flags else {})}],
         "accessors": buf.accessors, "bufferViews": buf.views,
         "buffers": [{"byteLength": len(buf.blob)}],
     }
@@ -136,10 +142,12 @@ def _xyzw(q_wxyz: np.ndarray) -> np.ndarray:
     return np.concatenate([q[..., 1:], q[..., :1]], axis=-1)
 
 
-def write_glb(motion: BodyMotion, fps: float, path: str | Path) -> Path:
-    """Write the body motion as a binary glTF file; returns the path."""
+def write_glb(motion: BodyMotion, fps: float, path: str | Path,
+              frame_flags: dict | None = None) -> Path:
+    """Write the body motion as a binary glTF file (frame_flags: see build_gltf); returns the
+    path."""
     path = Path(path)
-    doc, blob = build_gltf(motion, fps)
+    doc, blob = build_gltf(motion, fps, frame_flags)
     text = json.dumps(doc, separators=(",", ":")).encode()
     text += b" " * (-len(text) % 4)
     total = 12 + 8 + len(text) + 8 + len(blob)

@@ -63,6 +63,17 @@ def write_csv(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) -
     return path
 
 
+def frame_flags(rec: Reconstruction, physics: bool) -> dict[str, list[bool] | None]:
+    """The FLAG_COLUMNS per frame as lists of true/false: None for the physics flags when
+    `physics` is false or the result has no physics, and for physics_invalid where the result
+    does not record it."""
+    physics = physics and rec.has_physics
+    invalid = rec.invalid_physics
+    return {"detected": rec.detected.tolist(),
+            "physics_restart": rec.restart_flags.tolist() if physics else None,
+            "physics_invalid": invalid.tolist() if physics and invalid is not None else None}
+
+
 def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) -> Path:
     """Write {fps, units, axes, joint_names, time, video_frames, video_times, detected,
     physics_restart, physics_invalid, motions: {name: (T, J, 3) nested lists}}; video_frames
@@ -71,17 +82,13 @@ def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     frames, times = rec.video_frames, rec.video_times
-    physics = rec.has_physics
     doc = {
         "fps": rec.fps, "units": "m", "axes": "world: z up, ground plane z = 0",
         "joint_names": list(rec.joint_names),
         "time": np.round(np.arange(rec.num_frames) / rec.fps, 6).tolist(),
         "video_frames": None if frames is None else frames.tolist(),
         "video_times": None if times is None else np.round(times, 6).tolist(),
-        "detected": rec.detected.tolist(),
-        "physics_restart": rec.restart_flags.tolist() if physics else None,
-        "physics_invalid": None if not physics or rec.invalid_physics is None
-        else rec.invalid_physics.tolist(),
+        **frame_flags(rec, physics=True),
         "motions": {m: np.round(joints_of(rec, m), _DECIMALS).tolist() for m in motions},
     }
     path.write_text(strict_json(doc, separators=(",", ":")))  # a lost joint as null
