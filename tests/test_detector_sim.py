@@ -195,6 +195,30 @@ def test_noise_levels_follow_the_config():
     assert err3d[..., 2].std() == pytest.approx(0.04, rel=0.1)   # depth: 2x lateral
 
 
+def test_a_limb_errs_as_a_whole():
+    """MediaPipe's 3d error moves a limb together and keeps its bones' lengths (measured on
+    pose2sim); independent noise per landmark stretched them twice as much."""
+    clip = walking_clip(400, speed=0.0)
+    noisy = dataclasses.replace(NOISELESS, sigma_3d_white=0.03, seed=3, azimuth_deg=0.0)
+    at = {n: LANDMARK_INDEX[n] for n in ("left_hip", "left_knee", "left_ankle",
+                                         "left_foot_index", "left_elbow", "left_wrist")}
+
+    def measure(cfg):
+        sim = simulate_detections(clip, cfg)
+        err = sim.observations.world_landmarks - sim.world_landmarks
+        corr = np.corrcoef(err[:, at["left_knee"], 0], err[:, at["left_ankle"], 0])[0, 1]
+        wl = sim.observations.world_landmarks
+        thigh = np.linalg.norm(wl[:, at["left_knee"]] - wl[:, at["left_hip"]], axis=-1)
+        return corr, thigh.std(), err[:, at["left_wrist"], 0].std()
+
+    corr, thigh_sd, wrist_sd = measure(noisy)
+    corr0, thigh_sd0, wrist_sd0 = measure(dataclasses.replace(
+        noisy, noise_chain_correlation=0.0, bone_length_keep=0.0))
+    assert abs(corr0) < 0.15 and corr > 0.5
+    assert thigh_sd < 0.5 * thigh_sd0
+    assert wrist_sd == pytest.approx(wrist_sd0, rel=0.15)   # each landmark's error stays
+
+
 def test_scale_and_depth_bias_are_per_clip():
     clip = walking_clip()
     cfg = dataclasses.replace(NOISELESS, scale_bias_sigma=0.1, depth_scale_mean=0.8, seed=2)

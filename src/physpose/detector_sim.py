@@ -6,8 +6,9 @@ noise in proportion to the person's size in the image, given confidences that dr
 and torso-occluded landmarks, and corrupted by occasional outliers and left/right swaps (legs,
 arms or the whole body); hip-centred world landmarks, in the frame of the viewing ray through
 the hips (as MediaPipe's are, to within what the multi-view reference shows), get noise that is
-larger along that ray, and per clip a scale error, a depth compression and a lean towards
-or away from the camera. The draws depend on the seed and the clip's name, so two clips of
+larger along that ray, shared down each limb and turning its bones rather than stretching them
+(stop 76), and per clip a scale error, a depth compression and a lean towards or away from the
+camera. The draws depend on the seed and the clip's name, so two clips of
 the same length get their own noise (before stop 69 they shared one draw). Same config, seed
 and clip -> bit-identical output.
 
@@ -65,6 +66,24 @@ DEPTH_SCALE_MEAN = 0.62        # per-clip factor on hip-relative depth: monocula
 DEPTH_SCALE_SIGMA = 0.09
 LEAN_BIAS_SIGMA_DEG = 8.0      # per-clip tilt towards/away from the camera about the hips
 DRIFT_TIME = 0.5               # s, correlation time of the drifting parts (not measured)
+# Structure of the 3d error (stop 76, scratch errcorr76.py / bones76.py; docs/mediapipe_error.md,
+# Structure of the 3d error): MediaPipe places a limb as a whole. On the good views the errors
+# of neighbours down a limb correlate by 0.4-0.9 per axis (knee-ankle about 0.7, ankle-toe 0.9,
+# nose-ear 0.75), and its bones keep their length: the frame-to-frame sd of a bone's length
+# over the truth's is 0.06-0.08 on the legs, 0.05-0.12 on the arms. Independent noise per
+# landmark gave 0-0.5 and 0.12-0.32. The hips are the world landmarks' origin, and their
+# error does not correlate with the knees' (about 0), so the chains start below them.
+LIMB_PARENT = {f"{side}_{child}": f"{side}_{parent}" for side in ("left", "right")
+               for child, parent in (("knee", "hip"), ("ankle", "knee"), ("heel", "ankle"),
+                                     ("foot_index", "ankle"), ("elbow", "shoulder"),
+                                     ("wrist", "elbow"), ("pinky", "wrist"), ("index", "wrist"),
+                                     ("thumb", "wrist"))}
+NOISE_CHAIN_CORRELATION = 0.6  # a landmark's noise vs its parent's (LIMB_PARENT below the hips;
+                               # the face's points vs the nose): gives 0.7-0.8 with the per-clip
+                               # biases
+BONE_LENGTH_KEEP = 0.8         # share of the noise along hip-knee, knee-ankle, shoulder-elbow
+                               # and elbow-wrist removed (each bone's landmarks below it moved
+                               # alike): bone-length sd 0.06-0.08 (legs), 0.08-0.14 (arms)
 # Outliers and swaps. Measured: 8.2 % of landmark-frames off by > 5 % of the image height
 # (13 % of the person's height) pooled, 2.8-6.5 % in the views without swaps; whole-body
 # left/right swaps in 6.5 % of the frames pooled (all in one view, 26 %).
@@ -146,6 +165,8 @@ class DetectorSimConfig:
     depth_scale_sigma: float = DEPTH_SCALE_SIGMA
     lean_bias_sigma_deg: float = LEAN_BIAS_SIGMA_DEG
     drift_time: float = DRIFT_TIME
+    noise_chain_correlation: float = NOISE_CHAIN_CORRELATION   # 0: independent (before stop 76)
+    bone_length_keep: float = BONE_LENGTH_KEEP                 # 0: as before stop 76
     outlier_rate: float = OUTLIER_RATE
     swap_rate: float = SWAP_RATE
     far_side_drop: float = FAR_SIDE_DROP     # confidence model: see the constants above
@@ -273,6 +294,48 @@ def _drift(rng: np.random.Generator, shape: tuple, fps: float, tau: float) -> np
     return out
 
 
+# The chains of NOISE_CHAIN_CORRELATION; MediaPipe's order puts a parent before its children.
+_NOISE_PARENT = {**{c: p for c, p in LIMB_PARENT.items() if not p.endswith("_hip")},
+                 **{name: "nose" for name in FACE_OFFSETS if name != "nose"}}
+_BONES = tuple((LIMB_PARENT[c], c) for c in LIMB_PARENT if c.endswith(("knee", "ankle",
+                                                                         "elbow", "wrist")))
+
+
+def _descendants(name: str) -> list[int]:
+    """Landmark indices of `name` and everything below it in LIMB_PARENT."""
+    out = [name]
+    for child, parent in LIMB_PARENT.items():
+        if parent in out:
+            out.append(child)
+    return [LANDMARK_INDEX[n] for n in out]
+
+
+def _chain_correlated(noise: np.ndarray, rho: float) -> np.ndarray:
+    """(T, 33, D) unit-variance noise made to correlate by `rho` with each landmark's parent
+    (_NOISE_PARENT; rho^2 two links down), each landmark's variance kept."""
+    out = noise.copy()
+    for name in LANDMARK_NAMES:
+        parent = _NOISE_PARENT.get(name)
+        if parent is not None:
+            k, p = LANDMARK_INDEX[name], LANDMARK_INDEX[parent]
+            out[:, k] = rho * out[:, p] + np.sqrt(1.0 - rho * rho) * noise[:, k]
+    return out
+
+
+def _keep_bone_lengths(noise: np.ndarray, true_pos: np.ndarray, keep: float) -> np.ndarray:
+    """(T, 33, 3) noise with `keep` of its component along each of _BONES (the child's noise
+    minus the parent's, along the true bone) taken off the bone's child and every landmark
+    below it, so the limb turns rather than stretches."""
+    out = noise.copy()
+    for parent, child in _BONES:
+        p, c = LANDMARK_INDEX[parent], LANDMARK_INDEX[child]
+        bone = true_pos[:, c] - true_pos[:, p]
+        bone = bone / np.maximum(np.linalg.norm(bone, axis=-1, keepdims=True), 1e-9)
+        along = np.sum((out[:, c] - out[:, p]) * bone, axis=-1, keepdims=True)
+        out[:, _descendants(child)] -= (keep * along * bone)[:, None]
+    return out
+
+
 def _visibility(lm_cam: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Far-side weight in [0, 1] and torso occlusion (bool), both (T, 33)."""
     depth = lm_cam[..., 2]
@@ -367,10 +430,13 @@ def simulate_detections(clip: MocapClip, cfg: DetectorSimConfig = DetectorSimCon
     depth_scale = cfg.depth_scale_mean + cfg.depth_scale_sigma * rng.standard_normal()
     lean = axis_rotation("x", np.deg2rad(cfg.lean_bias_sigma_deg) * rng.standard_normal())
     axis_sigma = np.array([1.0, 1.0, cfg.depth_noise_ratio])
-    noise3d = (cfg.sigma_3d_white * rng.standard_normal((t, NUM_LANDMARKS, 3))
-               + cfg.sigma_3d_drift * _drift(rng, (t, NUM_LANDMARKS, 3), clip.fps,
-                                             cfg.drift_time)) * axis_sigma
-    wl = (wl_true @ lean.T) * np.array([1.0, 1.0, depth_scale]) * scale + gain[..., None] * noise3d
+    rho = cfg.noise_chain_correlation
+    noise3d = (cfg.sigma_3d_white * _chain_correlated(
+        rng.standard_normal((t, NUM_LANDMARKS, 3)), rho)
+        + cfg.sigma_3d_drift * _chain_correlated(
+            _drift(rng, (t, NUM_LANDMARKS, 3), clip.fps, cfg.drift_time), rho)) * axis_sigma
+    noise3d = _keep_bone_lengths(gain[..., None] * noise3d, wl_true, cfg.bone_length_keep)
+    wl = (wl_true @ lean.T) * np.array([1.0, 1.0, depth_scale]) * scale + noise3d
 
     # Outliers: a large jump with moderately high confidence; swaps: left/right exchanged.
     outliers = rng.random((t, NUM_LANDMARKS)) < cfg.outlier_rate
