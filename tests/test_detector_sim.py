@@ -13,6 +13,7 @@ from physpose.detector_sim import (
     simulate_detections,
     synthesize_landmarks,
 )
+from physpose.errors import PhysposeError
 from physpose.joints import (
     JOINT_INDEX,
     JOINT_NAMES,
@@ -213,10 +214,19 @@ def test_a_limb_errs_as_a_whole():
 
     corr, thigh_sd, wrist_sd = measure(noisy)
     corr0, thigh_sd0, wrist_sd0 = measure(dataclasses.replace(
-        noisy, noise_chain_correlation=0.0, bone_length_keep=0.0))
+        noisy, noise_chain_correlation=0.0, bone_stretch_removed=0.0))
     assert abs(corr0) < 0.15 and corr > 0.5
     assert thigh_sd < 0.5 * thigh_sd0
     assert wrist_sd == pytest.approx(wrist_sd0, rel=0.15)   # each landmark's error stays
+
+
+@pytest.mark.parametrize("field, value", [("noise_chain_correlation", 1.0),
+                                          ("noise_chain_correlation", -0.1),
+                                          ("bone_stretch_removed", 1.2)])
+def test_noise_structure_out_of_range_is_refused(field, value):
+    # (a correlation of 1.2 had given NaN landmarks, reported as a malformed keypoints file)
+    with pytest.raises(PhysposeError, match=field):
+        DetectorSimConfig(**{field: value})
 
 
 def test_scale_and_depth_bias_are_per_clip():

@@ -28,6 +28,7 @@ import numpy as np
 from physpose.joints import JOINT_INDEX, LANDMARK_INDEX, LANDMARK_NAMES, NUM_LANDMARKS
 from physpose.metrics import project, transform_points
 from physpose.mocap.common import MocapClip, body_height
+from physpose.errors import PhysposeError
 from physpose.mocap.rotations import axis_rotation
 from physpose.observations import Observations
 from physpose.pinhole import ray_frame
@@ -71,8 +72,9 @@ DRIFT_TIME = 0.5               # s, correlation time of the drifting parts (not 
 # of neighbours down a limb correlate by 0.4-0.9 per axis (knee-ankle about 0.7, ankle-toe 0.9,
 # nose-ear 0.75), and its bones keep their length: the frame-to-frame sd of a bone's length
 # over the truth's is 0.06-0.08 on the legs, 0.05-0.12 on the arms. Independent noise per
-# landmark gave 0-0.5 and 0.12-0.32. The hips are the world landmarks' origin, and their
-# error does not correlate with the knees' (about 0), so the chains start below them.
+# landmark gave 0.2-0.6 (from the per-clip biases alone) and 0.11-0.32. The hips are the world
+# landmarks' origin, and their error follows the knees' little (-0.3 to 0.1 on the left, 0.3-0.5
+# on the right), so the chains start below them.
 LIMB_PARENT = {f"{side}_{child}": f"{side}_{parent}" for side in ("left", "right")
                for child, parent in (("knee", "hip"), ("ankle", "knee"), ("heel", "ankle"),
                                      ("foot_index", "ankle"), ("elbow", "shoulder"),
@@ -81,9 +83,9 @@ LIMB_PARENT = {f"{side}_{child}": f"{side}_{parent}" for side in ("left", "right
 NOISE_CHAIN_CORRELATION = 0.6  # a landmark's noise vs its parent's (LIMB_PARENT below the hips;
                                # the face's points vs the nose): gives 0.7-0.8 with the per-clip
                                # biases
-BONE_LENGTH_KEEP = 0.8         # share of the noise along hip-knee, knee-ankle, shoulder-elbow
-                               # and elbow-wrist removed (each bone's landmarks below it moved
-                               # alike): bone-length sd 0.06-0.08 (legs), 0.08-0.14 (arms)
+BONE_STRETCH_REMOVED = 0.8     # share of the noise along hip-knee, knee-ankle, shoulder-elbow
+                               # and elbow-wrist removed (the landmarks below moved alike):
+                               # bone-length sd 0.06-0.08 (legs), 0.08-0.16 (arms)
 # Outliers and swaps. Measured: 8.2 % of landmark-frames off by > 5 % of the image height
 # (13 % of the person's height) pooled, 2.8-6.5 % in the views without swaps; whole-body
 # left/right swaps in 6.5 % of the frames pooled (all in one view, 26 %).
@@ -165,8 +167,8 @@ class DetectorSimConfig:
     depth_scale_sigma: float = DEPTH_SCALE_SIGMA
     lean_bias_sigma_deg: float = LEAN_BIAS_SIGMA_DEG
     drift_time: float = DRIFT_TIME
-    noise_chain_correlation: float = NOISE_CHAIN_CORRELATION   # 0: independent (before stop 76)
-    bone_length_keep: float = BONE_LENGTH_KEEP                 # 0: as before stop 76
+    noise_chain_correlation: float = NOISE_CHAIN_CORRELATION   # in [0, 1); 0: independent,
+    bone_stretch_removed: float = BONE_STRETCH_REMOVED         # in [0, 1]; 0: as before stop 76
     outlier_rate: float = OUTLIER_RATE
     swap_rate: float = SWAP_RATE
     far_side_drop: float = FAR_SIDE_DROP     # confidence model: see the constants above
@@ -189,6 +191,14 @@ class DetectorSimConfig:
                      depth_scale_mean=1.0, depth_scale_sigma=0.0, lean_bias_sigma_deg=0.0,
                      outlier_rate=0.0, swap_rate=0.0)
         return cls(**{**clean, **fields})
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.noise_chain_correlation < 1.0:
+            raise PhysposeError(f"noise_chain_correlation {self.noise_chain_correlation} is "
+                                "outside [0, 1)", remedy="give a correlation from 0 to below 1")
+        if not 0.0 <= self.bone_stretch_removed <= 1.0:
+            raise PhysposeError(f"bone_stretch_removed {self.bone_stretch_removed} is outside "
+                                "[0, 1]", remedy="give a share from 0 to 1")
 
 
 @dataclass(frozen=True, eq=False)
@@ -294,18 +304,21 @@ def _drift(rng: np.random.Generator, shape: tuple, fps: float, tau: float) -> np
     return out
 
 
-# The chains of NOISE_CHAIN_CORRELATION; MediaPipe's order puts a parent before its children.
+# The chains of NOISE_CHAIN_CORRELATION, and the bones BONE_STRETCH_REMOVED holds.
 _NOISE_PARENT = {**{c: p for c, p in LIMB_PARENT.items() if not p.endswith("_hip")},
                  **{name: "nose" for name in FACE_OFFSETS if name != "nose"}}
-_BONES = tuple((LIMB_PARENT[c], c) for c in LIMB_PARENT if c.endswith(("knee", "ankle",
-                                                                         "elbow", "wrist")))
+_KEPT_BONES = tuple((LIMB_PARENT[c], c) for c in LIMB_PARENT
+                    if c.endswith(("knee", "ankle", "elbow", "wrist")))
+# Both walks below go down the chains in MediaPipe's landmark order: parents come first.
+assert all(LANDMARK_INDEX[p] < LANDMARK_INDEX[c]
+           for c, p in (*LIMB_PARENT.items(), *_NOISE_PARENT.items()))
 
 
 def _descendants(name: str) -> list[int]:
     """Landmark indices of `name` and everything below it in LIMB_PARENT."""
     out = [name]
-    for child, parent in LIMB_PARENT.items():
-        if parent in out:
+    for child in sorted(LIMB_PARENT, key=LANDMARK_INDEX.get):
+        if LIMB_PARENT[child] in out:
             out.append(child)
     return [LANDMARK_INDEX[n] for n in out]
 
@@ -322,17 +335,18 @@ def _chain_correlated(noise: np.ndarray, rho: float) -> np.ndarray:
     return out
 
 
-def _keep_bone_lengths(noise: np.ndarray, true_pos: np.ndarray, keep: float) -> np.ndarray:
-    """(T, 33, 3) noise with `keep` of its component along each of _BONES (the child's noise
-    minus the parent's, along the true bone) taken off the bone's child and every landmark
-    below it, so the limb turns rather than stretches."""
+def _remove_bone_stretch(noise: np.ndarray, true_pos: np.ndarray, share: float) -> np.ndarray:
+    """(T, 33, 3) noise with `share` of its component along each of _KEPT_BONES (the child's
+    noise minus the parent's, along the true bone, before the per-clip lean and depth
+    compression: a first-order correction) taken off the bone's child and every landmark below
+    it, so the limb turns rather than stretches."""
     out = noise.copy()
-    for parent, child in _BONES:
+    for parent, child in _KEPT_BONES:
         p, c = LANDMARK_INDEX[parent], LANDMARK_INDEX[child]
         bone = true_pos[:, c] - true_pos[:, p]
         bone = bone / np.maximum(np.linalg.norm(bone, axis=-1, keepdims=True), 1e-9)
         along = np.sum((out[:, c] - out[:, p]) * bone, axis=-1, keepdims=True)
-        out[:, _descendants(child)] -= (keep * along * bone)[:, None]
+        out[:, _descendants(child)] -= (share * along * bone)[:, None]
     return out
 
 
@@ -435,7 +449,8 @@ def simulate_detections(clip: MocapClip, cfg: DetectorSimConfig = DetectorSimCon
         rng.standard_normal((t, NUM_LANDMARKS, 3)), rho)
         + cfg.sigma_3d_drift * _chain_correlated(
             _drift(rng, (t, NUM_LANDMARKS, 3), clip.fps, cfg.drift_time), rho)) * axis_sigma
-    noise3d = _keep_bone_lengths(gain[..., None] * noise3d, wl_true, cfg.bone_length_keep)
+    # The occlusion gain after: a hidden landmark's error grows by it, its neighbours' do not.
+    noise3d = gain[..., None] * _remove_bone_stretch(noise3d, wl_true, cfg.bone_stretch_removed)
     wl = (wl_true @ lean.T) * np.array([1.0, 1.0, depth_scale]) * scale + noise3d
 
     # Outliers: a large jump with moderately high confidence; swaps: left/right exchanged.
