@@ -25,10 +25,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from physpose.errors import PhysposeError
 from physpose.joints import JOINT_INDEX, LANDMARK_INDEX, LANDMARK_NAMES, NUM_LANDMARKS
 from physpose.metrics import project, transform_points
 from physpose.mocap.common import MocapClip, body_height
-from physpose.errors import PhysposeError
 from physpose.mocap.rotations import axis_rotation
 from physpose.observations import Observations
 from physpose.pinhole import ray_frame
@@ -167,7 +167,7 @@ class DetectorSimConfig:
     depth_scale_sigma: float = DEPTH_SCALE_SIGMA
     lean_bias_sigma_deg: float = LEAN_BIAS_SIGMA_DEG
     drift_time: float = DRIFT_TIME
-    noise_chain_correlation: float = NOISE_CHAIN_CORRELATION   # in [0, 1); 0: independent,
+    noise_chain_correlation: float = NOISE_CHAIN_CORRELATION   # in [0, 1); 0: independent
     bone_stretch_removed: float = BONE_STRETCH_REMOVED         # in [0, 1]; 0: as before stop 76
     outlier_rate: float = OUTLIER_RATE
     swap_rate: float = SWAP_RATE
