@@ -28,17 +28,25 @@ CSV_COLUMNS = ("frame", "time", "motion", "joint", "x", "y", "z", *VIDEO_COLUMNS
 _DECIMALS = 6  # metres: micrometre resolution
 
 
+def frame_flags(rec: Reconstruction, physics: bool) -> dict[str, list[bool] | None]:
+    """The FLAG_COLUMNS per frame as lists of true/false: None for the physics flags when
+    `physics` is false or the result has no physics, and for physics_invalid where the result
+    does not record it."""
+    physics = physics and rec.has_physics
+    invalid = rec.invalid_physics
+    return {"detected": rec.detected.tolist(),
+            "physics_restart": rec.restart_flags.tolist() if physics else None,
+            "physics_invalid": invalid.tolist() if physics and invalid is not None else None}
+
+
 def _frame_cells(rec: Reconstruction, physics: bool) -> list[tuple[str, ...]]:
     """Per frame, the VIDEO_COLUMNS and FLAG_COLUMNS cells (empty where the result does not
     record them; the physics flags only for `physics` rows of a result with physics)."""
     frames, times = rec.video_frames, rec.video_times
-    detected = rec.detected
-    physics = physics and rec.has_physics
-    restart, invalid = rec.restart_flags, rec.invalid_physics
+    flags = [frame_flags(rec, physics)[name] for name in FLAG_COLUMNS]
     return [("" if frames is None else str(int(frames[t])),
-             "" if times is None else f"{times[t]:.6f}", str(int(detected[t])),
-             str(int(restart[t])) if physics else "",
-             str(int(invalid[t])) if physics and invalid is not None else "")
+             "" if times is None else f"{times[t]:.6f}",
+             *("" if flag is None else str(int(flag[t])) for flag in flags))
             for t in range(rec.num_frames)]
 
 
@@ -61,17 +69,6 @@ def write_csv(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) -
                                for v in joints[t, j])  # a lost joint: empty, as in forces.csv
                     out.writerow((t, f"{times[t]:.6f}", motion, name, x, y, z, *cells[t]))
     return path
-
-
-def frame_flags(rec: Reconstruction, physics: bool) -> dict[str, list[bool] | None]:
-    """The FLAG_COLUMNS per frame as lists of true/false: None for the physics flags when
-    `physics` is false or the result has no physics, and for physics_invalid where the result
-    does not record it."""
-    physics = physics and rec.has_physics
-    invalid = rec.invalid_physics
-    return {"detected": rec.detected.tolist(),
-            "physics_restart": rec.restart_flags.tolist() if physics else None,
-            "physics_invalid": invalid.tolist() if physics and invalid is not None else None}
 
 
 def write_json(rec: Reconstruction, motions: tuple[str, ...], path: str | Path) -> Path:
