@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -205,3 +206,24 @@ def test_bad_input_is_a_clear_error(tmp_path, problem):
     else:
         with pytest.raises(PhysposeError, match="unknown export format 'fbx'"):
             export(folder, "fbx")
+
+
+@pytest.mark.parametrize("fmt", ["csv", "bvh"])
+def test_a_failed_write_keeps_the_earlier_file_and_leaves_no_part(tmp_path, monkeypatch, fmt):
+    """A write that fails midway (a full disk) leaves no half file that looks complete, and
+    the earlier export stays as it was."""
+    import physpose.export as export_module
+
+    folder = save_result(tmp_path, num_frames=4)
+    out = export(folder, fmt)
+    before = out.read_bytes()
+    writer = {"csv": "write_csv", "bvh": "write_bvh"}[fmt]
+
+    def full_disk(*args):
+        Path(args[-1]).write_text("half a file")
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(export_module, writer, full_disk)
+    with pytest.raises(OSError, match="No space left"):
+        export(folder, fmt)
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in folder.iterdir()) == sorted(["reconstruction.npz", out.name])

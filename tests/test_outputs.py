@@ -152,6 +152,9 @@ def _damage(path, how):
             arrays["joints_kinematic"] = np.array(1.0)
         elif how == "a field of the wrong shape":
             arrays["landmarks_kinematic"] = arrays["landmarks_kinematic"][:, :5]
+        elif how == "no frames":
+            frames = len(arrays["joints_kinematic"])
+            arrays = {k: v[:0] if v.ndim and len(v) == frames else v for k, v in arrays.items()}
         np.savez(path, **arrays)
 
 
@@ -165,6 +168,7 @@ def _damage(path, how):
     ("meta a list", "metadata is not a JSON object"),
     ("joints 0-d", "not arrays of the right dimensions"),
     ("a field of the wrong shape", "landmarks_kinematic has shape"),
+    ("no frames", "has no frames"),
 ])
 def test_a_damaged_reconstruction_is_named_in_the_error(tmp_path, how, message):
     """Whatever is wrong with reconstruction.npz, the error names the file (export, report and
@@ -174,3 +178,29 @@ def test_a_damaged_reconstruction_is_named_in_the_error(tmp_path, how, message):
     with pytest.raises(PhysposeError, match=message) as caught:
         Reconstruction.load(tmp_path)
     assert caught.value.path == str(path) and caught.value.remedy
+
+
+def test_metadata_is_strict_json_for_other_tools(tmp_path):
+    """A metric undefined on a short clip (NaN) or an invalid sample's loss (infinity) is
+    written as null, which JSON readers outside Python accept."""
+    meta = {"metrics": {"physics": {"jitter_mps2": float("nan")}},
+            "dynamics": {"windows": [{"loss": float("inf")}]}}
+    path = make_reconstruction(num_frames=4, meta=meta).save(tmp_path / "reconstruction.npz")
+    with np.load(path) as data:
+        text = str(data["meta_json"])
+
+    def refuse(token):
+        raise ValueError(f"non-standard JSON token {token}")
+    stored = json.loads(text, parse_constant=refuse)
+    assert stored["metrics"]["physics"]["jitter_mps2"] is None
+    assert stored["dynamics"]["windows"][0]["loss"] is None
+
+
+def test_positions_that_are_not_numbers_are_a_clear_error_naming_the_motion(tmp_path):
+    folder = save_result(tmp_path, num_frames=6)
+    rec = Reconstruction.load(folder)
+    joints = rec.joints("physics").copy()
+    joints[2, 1] = np.nan
+    rec.replace(joints_physics=joints).save(folder / "reconstruction.npz")
+    with pytest.raises(PhysposeError, match="physics motion holds positions that are not"):
+        summarize(folder)

@@ -213,3 +213,15 @@ def test_the_summary_says_where_the_result_lies_in_its_video(tmp_path):
     assert rows[1] == ("video", "walk.mp4")
     assert rows[2] == ("in the video", "2.00-2.08 s (frames 60-62)")  # footage seconds
     assert "in the video" not in dict(summary_rows(make_reconstruction(num_frames=3), tmp_path))
+
+
+@needs_bundle
+def test_stored_metrics_are_shown_under_their_labels_and_undefined_ones_as_a_dash(tmp_path):
+    """`physpose report` on a folder reads the metrics write_outputs stored, and shows them as
+    the summary does; a metric a short clip leaves undefined (NaN) is a dash, not 'nan'."""
+    meta = {"metrics": {"kinematic": {"foot_skate_pct": 2.5, "jitter_mps2": float("nan")}}}
+    folder = save_result(tmp_path, num_frames=4, meta=meta)
+    page = build_report(folder).read_text()
+    assert "<td>foot skate (% frames)</td><td class=\"num\">2.5</td>" in page
+    assert "<td>jitter (m/s^2)</td><td>—</td>" in page
+    assert "foot_skate_pct</td>" not in page and ">nan<" not in page

@@ -27,19 +27,11 @@ from physpose.reconstruction import Reconstruction
 from physpose.render.overlay import DEFAULT_NAME as OVERLAY_NAME
 from physpose.render.result import available_motions, load_result
 from physpose.report import DEFAULT_NAME as REPORT_NAME
+from physpose.report.data import METRIC_LABELS
 
 _log = logging.getLogger(__name__)
 METRICS_FILE = "metrics.json"
 OVERLAY_PNG = "overlay.png"
-# Metric keys of `evaluate` in the order and with the labels of the summary table.
-METRIC_LABELS = {
-    "mpjpe_2d_px": "MPJPE-2d vs detections (px)",
-    "foot_skate_pct": "foot skate (% frames)",
-    "float_pct": "float (% frames)",
-    "penetration_mean_mm": "penetration mean (mm)",
-    "penetration_max_mm": "penetration max (mm)",
-    "jitter_mps2": "jitter (m/s^2)",
-}
 DEFAULT_FORMATS = ("bvh", "glb", "csv", "forces")
 
 __all__ = ["summarize", "write_outputs", "metrics_table", "METRICS_FILE", "DEFAULT_FORMATS"]
@@ -52,6 +44,9 @@ def _landmarks(rec: Reconstruction, motion: str) -> np.ndarray:
 def motion_metrics(rec: Reconstruction, motion: str) -> dict[str, float]:
     """The metrics of one motion ('kinematic' or 'physics'), keyed as in METRIC_LABELS."""
     joints = rec.joints_kinematic if motion == "kinematic" else rec.joints("physics")
+    if not np.isfinite(joints).all():  # metrics.evaluate would raise a bare ValueError
+        raise PhysposeError(f"the {motion} motion holds positions that are not numbers (NaN or "
+                            "infinity)", remedy="re-run the reconstruction")
     kwargs = {}
     landmarks = _landmarks(rec, motion)
     if landmarks is not None:
@@ -137,7 +132,7 @@ def write_outputs(result_dir: str | Path, *, video: str | Path | None = None,
     if report:
         from physpose.report import build_report  # noqa: PLC0415 (reads the viewer bundle)
 
-        written["report"] = build_report(folder, metrics=_labelled(metrics))
+        written["report"] = build_report(folder)  # the metrics just stored in its meta
     if overlay:
         from physpose.render.overlay import render_overlay, save_overlay_png  # noqa: PLC0415
 
@@ -164,8 +159,3 @@ def _clear_earlier_outputs(folder: Path, rewritten: set[str]) -> None:
     if gone:
         _log.warning("%s: removed %s, written there by an earlier run from another "
                      "reconstruction (not asked for this time)", folder, ", ".join(gone))
-
-
-def _labelled(metrics: dict[str, dict[str, float]]) -> dict[str, dict[str, float]]:
-    """The metrics keyed by their human labels, for the report's table."""
-    return {m: {METRIC_LABELS[k]: v for k, v in values.items()} for m, values in metrics.items()}

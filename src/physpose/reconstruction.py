@@ -17,6 +17,7 @@ import numpy as np
 
 from physpose.errors import PhysposeError, about
 from physpose.joints import NUM_LANDMARKS
+from physpose.json_text import strict_json
 from physpose.npz_io import read_npz, write_npz
 from physpose.skeleton import NUM_DOF
 
@@ -87,6 +88,9 @@ class Reconstruction:
             raise PhysposeError(f"reconstruction frame rate {self.fps} must be positive",
                                 remedy="give the rate of the motion's frames")
         t = self.joints_kinematic.shape[0]
+        if t < 1:
+            raise PhysposeError("the reconstruction has no frames",
+                                remedy="reconstruct a span of the video that shows the person")
         j = len(self.joint_names)
         checks = {
             "joints_kinematic": (t, j, 3), "landmarks_kinematic": (t, NUM_LANDMARKS, 3),
@@ -230,7 +234,7 @@ class Reconstruction:
         arrays["joint_names"] = np.array(self.joint_names)
         if self.body_mjcf is not None:
             arrays["body_mjcf"] = np.array(self.body_mjcf)
-        arrays["meta_json"] = np.array(json.dumps(self.meta, default=str))
+        arrays["meta_json"] = np.array(strict_json(self.meta, default=str))  # NaN as null
         return write_npz(path, arrays)
 
     @staticmethod

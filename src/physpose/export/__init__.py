@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from physpose.cache import atomic_path
 from physpose.errors import PhysposeError, expect_type
 from physpose.export.bvh import write_bvh
 from physpose.export.gltf import write_glb
@@ -36,23 +37,29 @@ def export(result_dir: str | Path, fmt: str, out: str | Path | None = None,
                 "'reconstruction.npz'))")
     rec, folder = load_result(result_dir)
     out = _target(folder, fmt, out)
-    if fmt == "forces":
-        if motion == "kinematic":
-            raise PhysposeError("only the physics motion has forces", path=folder,
-                                remedy="export forces without --motion kinematic")
-        return write_forces_csv(rec, out)
-    if fmt in ("csv", "json"):
-        motions = available_motions(rec) if motion is None else (pick_motion(rec, motion, folder),)
-        return (write_csv if fmt == "csv" else write_json)(rec, motions, out)
-    which = pick_motion(rec, motion, folder)
-    body = reconstruction_motion(rec, which)
-    if body is None:
-        raise PhysposeError(f"this result stores no body model and {which} qpos, which {fmt} "
-                            "export needs", path=folder,
-                            remedy="export csv or json, or re-run the reconstruction")
-    if fmt == "bvh":  # BVH has no place for per-frame data: joints.csv carries the flags
-        return write_bvh(body, rec.fps, out)
-    return write_glb(body, rec.fps, out, frame_flags(rec, physics=which == "physics"))
+    if fmt == "forces" and motion == "kinematic":
+        raise PhysposeError("only the physics motion has forces", path=folder,
+                            remedy="export forces without --motion kinematic")
+    body = None
+    if fmt in ("bvh", "glb"):
+        which = pick_motion(rec, motion, folder)
+        body = reconstruction_motion(rec, which)
+        if body is None:
+            raise PhysposeError(f"this result stores no body model and {which} qpos, which "
+                                f"{fmt} export needs", path=folder,
+                                remedy="export csv or json, or re-run the reconstruction")
+    with atomic_path(out) as tmp:  # a failed write (a full disk) leaves no half file
+        if fmt == "forces":
+            write_forces_csv(rec, tmp)
+        elif fmt in ("csv", "json"):
+            motions = (available_motions(rec) if motion is None
+                       else (pick_motion(rec, motion, folder),))
+            (write_csv if fmt == "csv" else write_json)(rec, motions, tmp)
+        elif fmt == "bvh":  # BVH has no place for per-frame data: joints.csv carries the flags
+            write_bvh(body, rec.fps, tmp)
+        else:
+            write_glb(body, rec.fps, tmp, frame_flags(rec, physics=which == "physics"))
+    return out
 
 
 def _target(folder: Path, fmt: str, out: str | Path | None) -> Path:

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import html
 import json
+import math
 from pathlib import Path
 from string import Template
 
 from physpose import __version__
+from physpose.cache import atomic_path
 from physpose.errors import PhysposeError
 from physpose.reconstruction import Reconstruction
 from physpose.report.data import metric_rows, report_data, summary_rows
@@ -55,8 +57,8 @@ def build_report(result_dir: str | Path, out_html: str | Path | None = None,
         "<p class=\"hint\">No metrics stored with this result.</p>",
         data=_script_safe(data_json),
         script=_script_safe(BUNDLE.read_text()))
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(page)
+    with atomic_path(out) as tmp:
+        tmp.write_text(page)
     return out
 
 
@@ -67,8 +69,10 @@ def _script_safe(text: str) -> str:
 
 def _table(columns: list[str], rows: list[list], header: bool = True) -> str:
     def cell(v) -> str:
-        if isinstance(v, float):
+        if isinstance(v, float) and math.isfinite(v):
             return f'<td class="num">{v:.4g}</td>'
+        if isinstance(v, float):  # NaN: metrics.json's null, not a number
+            v = None
         if isinstance(v, int) and not isinstance(v, bool):
             return f'<td class="num">{v}</td>'
         return f"<td>{html.escape('—' if v is None else str(v))}</td>"

@@ -16,6 +16,15 @@ from physpose.render.skeleton import (FEET, edge_indices, foot_contacts, foot_he
                                       lowest_foot_points)
 from physpose.skeleton import DOF_NAMES, NUM_DOF
 
+# Metric keys of `evaluate` in the order and with the labels of the summary and report tables.
+METRIC_LABELS = {
+    "mpjpe_2d_px": "MPJPE-2d vs detections (px)",
+    "foot_skate_pct": "foot skate (% frames)",
+    "float_pct": "float (% frames)",
+    "penetration_mean_mm": "penetration mean (mm)",
+    "penetration_max_mm": "penetration max (mm)",
+    "jitter_mps2": "jitter (m/s^2)",
+}
 _DECIMALS = 4  # metres: 0.1 mm in the page's data
 # Plot colours per (motion, foot); the viewer uses the same blue/orange per motion.
 _SERIES_COLORS = {("physics", "left"): "#2f6fd6", ("physics", "right"): "#7fa8ea",
@@ -196,14 +205,16 @@ def _finite(v) -> bool:
 
 
 def metric_rows(rec: Reconstruction, metrics: dict | None) -> tuple[list, list]:
-    """(columns, rows) of the metric table: {name: value} or {group: {name: value}}."""
+    """(columns, rows) of the metric table: {name: value} or {group: {name: value}}, the
+    result's stored metrics where None; a name in METRIC_LABELS is shown by its label."""
     if metrics is None:
         metrics = rec.meta.get("metrics") or {}
     if metrics and all(isinstance(v, dict) for v in metrics.values()):
         columns = list(metrics)
         names = list(dict.fromkeys(k for v in metrics.values() for k in v))
-        return columns, [[n] + [metrics[c].get(n) for c in columns] for n in names]
-    return ["value"], [[k, v] for k, v in metrics.items()]
+        return columns, [[METRIC_LABELS.get(n, n)] + [metrics[c].get(n) for c in columns]
+                         for n in names]
+    return ["value"], [[METRIC_LABELS.get(k, k), v] for k, v in metrics.items()]
 
 
 def slow_motion_note(rec: Reconstruction) -> str:
