@@ -200,3 +200,32 @@ def test_unreadable_containers(tmp_path):
 
 def test_result_is_observations(tmp_path):
     assert isinstance(load_keypoints(_write_json(tmp_path, _doc())), Observations)
+
+
+def test_bad_masks_are_refused(tmp_path):
+    assert "masks is not a rectangular array" in _error(
+        tmp_path, _doc(masks=[[[0, 1], [2, 3]]] * (T - 1) + [[[0, 1]]]))
+    nan_masks = np.zeros((T, 2, 2))
+    nan_masks[2, 1, 1] = np.nan
+    assert "masks must hold numbers 0-255" in _error(tmp_path, _doc(masks=nan_masks.tolist()))
+
+
+def test_a_singular_homography_names_its_frame(tmp_path):
+    maps = np.tile(np.eye(3), (T, 1, 1))
+    maps[4] = 0.0
+    text = _error(tmp_path, _doc(homographies=maps.tolist()))
+    assert "frame 4" in text and "singular" in text
+
+
+def test_timestamps_at_another_rate_than_fps_are_refused(tmp_path):
+    text = _error(tmp_path, _doc(timestamps=(np.arange(T) / 100.0).tolist()))
+    assert "timestamps are 100 frames a second, fps says 30" in text
+
+
+def test_a_camera_matrix_that_is_not_a_pinhole_is_blamed_on_the_file(tmp_path):
+    text = _error(tmp_path, _doc(camera_K=[[0, 0, 0], [0, 0, 0], [0, 0, 0]], source="walk.mp4"))
+    assert "not a pinhole matrix" in text and "walk.mp4" not in text
+
+
+def test_another_format_is_refused(tmp_path):
+    assert "is not physpose-keypoints version 1" in _error(tmp_path, _doc(format="coco"))

@@ -290,6 +290,33 @@ def test_bvh_errors_name_file_and_line(tmp_path):
         load_mocap(tmp_path / "d.bvh")
 
 
+
+@pytest.mark.parametrize("header, message", [
+    ("Frames: nan", "must be a whole number"),
+    ("Frames: 3.5", "must be a whole number"),
+    ("Frame Time: inf", "a positive number of seconds"),
+    ("Frame Time: 1000000", "frame rate 1e-06 Hz is outside"),
+])
+def test_bvh_header_of_no_usable_rate_is_refused(tmp_path, header, message):
+    """A frame count or rate that cannot be right stops with the file named, before it could
+    resample a million frames into memory."""
+    text = write_bvh(tmp_path / "a.bvh", bvh_rows(4)).read_text()
+    key = header.split(":")[0]
+    old = next(line for line in text.splitlines() if line.startswith(key + ":"))
+    (tmp_path / "b.bvh").write_text(text.replace(old, header))
+    with pytest.raises(PhysposeError, match=message) as caught:
+        load_mocap(tmp_path / "b.bvh")
+    assert caught.value.path == str(tmp_path / "b.bvh")
+
+
+def test_a_clip_under_two_frames_long_is_refused(tmp_path):
+    rows = bvh_rows(2)
+    path = write_bvh(tmp_path / "short.bvh", rows)
+    path.write_text(path.read_text().replace("Frame Time: 0.1", "Frame Time: 0.008333"))
+    with pytest.raises(PhysposeError, match="under two frames at 25 Hz"):
+        load_mocap(path)
+
+
 # --- ASF/AMC ------------------------------------------------------------------------------
 
 def _asf_bone(i, name, direction, length, axis="0 0 0", dof="rx ry rz"):
@@ -414,6 +441,14 @@ def test_asf_amc_errors_name_file_and_line(tmp_path):
     (tmp_path / "s2.amc").write_text("\n".join(lines))
     with pytest.raises(PhysposeError, match=r"s2\.amc: line 7: bone '\w+' has 4 values"):
         load_mocap(tmp_path / "s2.amc", asf=asf)
+    lines = amc.read_text().splitlines()
+    lines[6] = lines[6].rsplit(" ", 1)[0] + " nan"
+    (tmp_path / "s3.amc").write_text("\n".join(lines))
+    with pytest.raises(PhysposeError, match=r"s3\.amc: line 7: bone '\w+' has a NaN or infinite"):
+        load_mocap(tmp_path / "s3.amc", asf=asf)
+    (tmp_path / "nameless.asf").write_text(asf.read_text().replace("name lfemur", "name"))
+    with pytest.raises(PhysposeError, match=r"nameless\.asf: line \d+: name needs 1 value, got 0"):
+        parse_asf(tmp_path / "nameless.asf")
 
 
 # --- DeepMimic ----------------------------------------------------------------------------
@@ -481,6 +516,24 @@ def test_deepmimic_errors(tmp_path):
     (tmp_path / "humanoid3d_broken.txt").write_text('{"Frames": [1, 2,\n')
     with pytest.raises(PhysposeError, match=r"humanoid3d_broken\.txt: line 2: not valid JSON"):
         load_mocap(tmp_path / "humanoid3d_broken.txt")
+    (tmp_path / "humanoid3d_words.txt").write_text(json.dumps(
+        {"Frames": [dm_frame(), ["fast"] + dm_frame()[1:]]}))
+    with pytest.raises(PhysposeError, match=r"frame 1: Frames\[1\] holds something other"):
+        load_mocap(tmp_path / "humanoid3d_words.txt")
+    zero_turn = write_deepmimic(tmp_path, [dm_frame(), dm_frame(root_quat=(0, 0, 0, 0))],
+                                name="humanoid3d_zero.txt")
+    with pytest.raises(PhysposeError, match="not finite .*zero-length quaternion") as caught:
+        load_mocap(zero_turn)
+    assert caught.value.frame == 1
+    (tmp_path / "humanoid3d_latin1.txt").write_bytes(b'{"Frames": [], "Loop": "\xe9"}')
+    with pytest.raises(PhysposeError, match="not a UTF-8 JSON file"):
+        load_mocap(tmp_path / "humanoid3d_latin1.txt")
+    character = tmp_path / "character_humanoid3d.txt"
+    doc = json.loads(character.read_text())
+    del doc["Skeleton"]["Joints"][4]["Type"]
+    character.write_text(json.dumps(doc))
+    with pytest.raises(PhysposeError, match=r"Skeleton/Joints\[4\] needs the numbers"):
+        load_mocap(zero_turn)
 
 
 def test_unknown_extension(tmp_path):

@@ -81,7 +81,7 @@ def save_keypoints(obs: Observations, path: str | Path) -> Path:
 def _read_json(path: Path) -> dict[str, Any]:
     try:
         doc = json.loads(path.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise PhysposeError(f"not valid JSON ({exc})", path=path,
                             remedy="fix the file; " + _DOC) from None
     if not isinstance(doc, dict):
@@ -114,6 +114,11 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
         fail("landmark_names differ from MediaPipe's 33-landmark order",
              "reorder the keypoints to MediaPipe Pose order")
 
+    if str(np.asarray(raw.get("format", "physpose-keypoints"))) != "physpose-keypoints" \
+            or _number(raw.get("format_version", 1)) != 1:
+        fail(f"format {raw.get('format')!r} version {raw.get('format_version')!r} is not "
+             "physpose-keypoints version 1", "leave format and format_version out, or write "
+             "\"physpose-keypoints\" and 1")
     fps = _number(raw["fps"])
     if fps is None or not (math.isfinite(fps) and 0.5 <= fps <= 1000):
         fail(f"fps {raw['fps']!r} is not a frame rate in 0.5-1000 Hz",
@@ -169,6 +174,9 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
     elif t > 1 and np.any(np.diff(ts) <= 0):
         fail("timestamps are not strictly increasing",
              "give one increasing time in seconds per frame", int(np.argmax(np.diff(ts) <= 0)) + 1)
+    elif t > 1 and abs(float(np.median(np.diff(ts))) * fps - 1) > 0.25:
+        fail(f"timestamps are {1 / float(np.median(np.diff(ts))):g} frames a second, fps says "
+             f"{fps:g}", "make fps the rate of the frames, or leave timestamps out")
     detected = per_frame["detected"]
     detected = (conf > 0).any(axis=1) if detected is None else detected.astype(bool)
     interpolated = per_frame["interpolated"]
@@ -178,18 +186,41 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
     if camera_k is not None and (camera_k.shape != (3, 3) or not np.isfinite(camera_k).all()):
         fail(f"camera_K has shape {camera_k.shape} or non-finite values, expected a finite "
              "3x3 matrix", "give the intrinsics [[fx,0,cx],[0,fy,cy],[0,0,1]] in pixels")
+    if camera_k is not None and (camera_k[0, 0] <= 0 or camera_k[1, 1] <= 0
+                                 or not np.allclose(camera_k[2], [0, 0, 1])):
+        fail(f"camera_K {camera_k.tolist()} is not a pinhole matrix (fx, fy > 0, last row "
+             "0 0 1)", "give the intrinsics [[fx,0,cx],[0,fy,cy],[0,0,1]] in pixels")
     homographies = None if raw.get("homographies") is None else \
         _array(raw["homographies"], "homographies", fail)
     if homographies is not None and (homographies.shape != (t, 3, 3)
                                      or not np.isfinite(homographies).all()):
         fail(f"homographies has shape {homographies.shape} or non-finite values, expected "
              f"({t}, 3, 3)", "give one 3x3 map per frame, or leave homographies out")
+    if homographies is not None:
+        xy1 = np.concatenate([kp[..., :2], np.ones((t, NUM_LANDMARKS, 1))], axis=-1)
+        w = np.einsum("tj,tnj->tn", homographies[:, 2], xy1)
+        bad = (np.abs(np.linalg.det(homographies)) < 1e-12) \
+            | ((detected | interpolated) & ~(w > 1e-9).all(axis=1))  # as map_keypoints maps
+        if bad.any():
+            fail("a homography is singular or maps a keypoint to infinity",
+                 "give each frame an invertible map of the middle frame's pixels to its own",
+                 int(np.argmax(bad)))
     motion = raw.get("camera_motion")
     motion = None if motion is None else str(np.asarray(motion))
     if motion is not None and motion not in CAMERA_MOTIONS:
         fail(f"camera_motion {motion!r} is not one of {', '.join(CAMERA_MOTIONS)}",
              "leave camera_motion out, or write what `physpose observe` wrote")
     masks = raw.get("masks")
+    if masks is not None:
+        try:
+            masks = np.asarray(masks)
+        except ValueError:
+            fail("masks is not a rectangular array", "give masks as (T, h, w) uint8, or leave "
+                 "them out")
+        if masks.dtype.kind not in "biuf" or not np.isfinite(masks).all() \
+                or masks.min(initial=0) < 0 or masks.max(initial=0) > 255:
+            fail("masks must hold numbers 0-255 (person probability x 255)",
+                 "give masks as (T, h, w) uint8, or leave them out")
     source = raw.get("source")
     recorded = str(path) if source is None else str(np.asarray(source))
     with about(path, instead_of=recorded):  # the checks name the recorded video, not this file
@@ -197,7 +228,7 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
             source=recorded, fps=float(fps), image_size=(int(size[0]), int(size[1])),
             timestamps=ts.astype(float), keypoints2d=kp, detected=detected,
             interpolated=interpolated, world_landmarks=per_frame["world_landmarks"],
-            masks=None if masks is None else np.asarray(masks), camera_K=camera_k,
+            masks=masks, camera_K=camera_k,
             frame_indices=None if per_frame["frame_indices"] is None
             else per_frame["frame_indices"].astype(np.int64),
             homographies=homographies, camera_motion=motion,

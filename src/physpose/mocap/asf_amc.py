@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from physpose.errors import PhysposeError
+from physpose.mocap.bvh import REST_EXTENT
 from physpose.mocap.common import MocapClip, finish_clip, line_error, read_lines
 from physpose.mocap.rotations import euler_matrix
 from physpose.mocap.skeleton import motion_from_tree
@@ -84,9 +85,18 @@ def parse_asf(path: str | Path) -> AsfSkeleton:
 
     def num(tok: str, lineno: int) -> float:
         try:
-            return float(tok)
+            value = float(tok)
         except ValueError:
             fail(lineno, f"{tok!r} is not a number")
+        if not np.isfinite(value):
+            fail(lineno, f"{tok!r} is not a finite number")
+        return value
+
+    def args(tokens: list[str], lineno: int, count: int) -> list[str]:
+        if len(tokens) - 1 != count:
+            fail(lineno, f"{tokens[0]} needs {count} value{'s' * (count > 1)}, got "
+                         f"{len(tokens) - 1}")
+        return tokens[1:]
 
     try:
         sections = _sections(lines)
@@ -99,8 +109,8 @@ def parse_asf(path: str | Path) -> AsfSkeleton:
 
     units = {"length": 1.0, "angle": "deg"}
     for lineno, tokens in by_key.get("units", (0, []))[1]:
-        if len(tokens) >= 2 and tokens[0] in ("length", "mass"):
-            units[tokens[0]] = num(tokens[1], lineno)
+        if tokens[0] in ("length", "mass"):
+            units[tokens[0]] = num(args(tokens, lineno, 1)[0], lineno)
         elif len(tokens) >= 2 and tokens[0] == "angle":
             if tokens[1].lower() not in ("deg", "rad"):
                 fail(lineno, f"angle unit {tokens[1]!r} is neither deg nor rad")
@@ -143,11 +153,11 @@ def parse_asf(path: str | Path) -> AsfSkeleton:
         elif block is None:
             fail(lineno, f"{tokens[0]!r} outside begin/end")
         elif key == "name":
-            block["name"] = tokens[1]
+            block["name"] = args(tokens, lineno, 1)[0]
         elif key == "direction":
-            block["direction"] = np.array([num(t, lineno) for t in tokens[1:4]])
+            block["direction"] = np.array([num(t, lineno) for t in args(tokens, lineno, 3)])
         elif key == "length":
-            block["length"] = num(tokens[1], lineno)
+            block["length"] = num(args(tokens, lineno, 1)[0], lineno)
         elif key == "axis":
             if len(tokens) != 5 or sorted(tokens[4].lower()) != ["x", "y", "z"]:
                 fail(lineno, "axis needs three angles and an order such as XYZ")
@@ -225,9 +235,12 @@ def parse_amc(path: str | Path, skeleton: AsfSkeleton) -> dict[str, np.ndarray]:
         if len(tokens) - 1 != width[name]:
             fail(i + 1, f"bone {name!r} has {len(tokens) - 1} values, its dof needs {width[name]}")
         try:
-            frames[-1][name] = [float(t) for t in tokens[1:]]
+            values = [float(t) for t in tokens[1:]]
         except ValueError:
             fail(i + 1, "a motion value is not a number")
+        if not np.isfinite(values).all():
+            fail(i + 1, f"bone {name!r} has a NaN or infinite value")
+        frames[-1][name] = values
     if not frames:
         fail(len(lines), "no frames")
     out = {}
@@ -322,6 +335,12 @@ def load_amc(path: str | Path, target_fps: float | None = 25.0, asf: str | Path 
     names, parents, pos, rot = asf_forward_kinematics(skeleton, motion)
     rest = {k: np.zeros((1, v.shape[1])) for k, v in motion.items()}
     rest_pos = asf_forward_kinematics(skeleton, rest)[2][0]
+    extent = float(np.ptp(rest_pos, axis=0).max())
+    if not REST_EXTENT[0] <= extent <= REST_EXTENT[1]:
+        raise PhysposeError(f"the skeleton's rest pose spans {extent:.2f} m, not a person "
+                            f"({REST_EXTENT[0]:g}-{REST_EXTENT[1]:g} m)", path=skeleton.path,
+                            remedy="check ':units length' (one file unit is 1/length inch; "
+                                   "CMU: length 0.45)")
     times = np.arange(len(pos)) / source_fps
     tree = motion_from_tree(path.stem, str(path), times, names, parents, pos, rot, rest_pos)
     return finish_clip(tree, target_fps)

@@ -128,9 +128,12 @@ def parse_bvh(path: str | Path) -> BvhFile:
             fail(i + 1, f"expected '{label.capitalize()} ...'")
         header[label] = floats(lines[i].strip()[len(label):].split(), i + 1, 1)[0]
         i += 1
-    n_frames, frame_time = int(header["frames:"]), float(header["frame time:"])
-    if n_frames < 1 or not frame_time > 0:
-        fail(i, f"Frames ({n_frames}) and Frame Time ({frame_time}) must be positive")
+    n_frames, frame_time = header["frames:"], float(header["frame time:"])
+    if not (np.isfinite(n_frames) and n_frames >= 1 and n_frames == int(n_frames)) \
+            or not (np.isfinite(frame_time) and frame_time > 0):
+        fail(i, f"Frames ({n_frames:g}) must be a whole number and Frame Time ({frame_time:g}) "
+                "a positive number of seconds")
+    n_frames = int(n_frames)
     n_channels = sum(len(n.channels) for n in nodes)
     rows = []
     for j in range(i, len(lines)):

@@ -34,6 +34,8 @@ STANDING_FOOT_HEIGHT = 0.03  # m, ... over frames where both feet are at most th
 START_JUMP_MIN = 0.1     # m
 START_JUMP_RATIO = 4.0
 START_JUMP_WITHIN = 1.0  # s
+SOURCE_FPS_RANGE = (1.0, 2000.0)  # Hz, a motion file's own rate (median frame step)
+MAX_GAP_S = 1.0          # s, the longest step between two frames of a capture
 # Rigid segments (constant length in every clip): thigh, shin, heel, upper arm, forearm, pelvis.
 BONES: tuple[tuple[str, str], ...] = tuple(
     (f"{s}_{a}", f"{s}_{b}") for s in SIDES for a, b in (
@@ -136,13 +138,23 @@ def rotation_to_z_up(up: np.ndarray) -> np.ndarray:
 
 def finish_clip(motion: SkeletonMotion, target_fps: float | None) -> MocapClip:
     """Z up, trunk joints, floor at z = 0 and a uniform rate (`target_fps`; None keeps the file's)."""
-    if target_fps is not None and not (math.isfinite(target_fps) and target_fps > 0):
-        raise PhysposeError(f"target_fps {target_fps} must be a positive rate",
+    if target_fps is not None and not (math.isfinite(target_fps)
+                                       and 0 < target_fps <= SOURCE_FPS_RANGE[1]):
+        raise PhysposeError(f"target_fps {target_fps} must be a positive rate up to "
+                            f"{SOURCE_FPS_RANGE[1]:g} Hz",
                             path=motion.source,
                             remedy="use e.g. 25, or None to keep the file's own rate")
     missing = set(ANATOMICAL_POINTS) - motion.points.keys()
     if missing:
         raise PhysposeError(f"reader produced no {sorted(missing)}", path=motion.source)
+    for key, value in [*motion.points.items(), ("head_rot", motion.head_rot),
+                       ("hand_rot", motion.hand_rot)]:
+        bad = ~np.isfinite(value.reshape(len(value), -1)).all(axis=1)
+        if bad.any():
+            raise PhysposeError(f"{key} is not finite (a NaN or infinite value, or a zero-length "
+                                "quaternion, in the file)", path=motion.source,
+                                frame=int(np.argmax(bad)) + motion.leading_frames_dropped,
+                                remedy="fix or cut that frame of the file (frames count from 0)")
     r = rotation_to_z_up(motion.up)
     pts = {k: v @ r.T for k, v in motion.points.items()}
     head_rot = r @ motion.head_rot
@@ -150,8 +162,23 @@ def finish_clip(motion: SkeletonMotion, target_fps: float | None) -> MocapClip:
 
     times = motion.times - motion.times[0]
     dts = np.diff(times)
-    if len(times) < 2 or (dts <= 0).any():
-        raise PhysposeError("frame times must increase (at least two frames)", path=motion.source)
+    if len(times) < 2 or not np.isfinite(times).all() or (dts <= 0).any():
+        bad = int(np.argmax(~(np.isfinite(dts) & (dts > 0)))) + 1 if len(dts) else None
+        raise PhysposeError("frame times must increase (at least two frames)", path=motion.source,
+                            frame=bad, remedy="give each frame a positive, finite frame time")
+    source_fps = float(1.0 / np.median(dts))
+    lo, hi = SOURCE_FPS_RANGE
+    if not lo <= source_fps <= hi:
+        raise PhysposeError(f"the file's frame rate {source_fps:g} Hz is outside {lo:g}-{hi:g} "
+                            "Hz", path=motion.source,
+                            remedy="check the frame time, in seconds per frame (BVH 'Frame "
+                                   "Time:', a DeepMimic row's first value; 0.008333 for 120 Hz)")
+    gap = int(np.argmax(dts))
+    if dts[gap] > MAX_GAP_S:
+        raise PhysposeError(f"{dts[gap]:g} s between frames {gap} and {gap + 1}",
+                            path=motion.source, frame=gap + 1,
+                            remedy=f"a capture has no gaps over {MAX_GAP_S:g} s: fix the frame's "
+                                   "time step")
     floor = estimate_floor(pts, times)
     for v in pts.values():
         v[:, 2] -= floor
@@ -163,9 +190,11 @@ def finish_clip(motion: SkeletonMotion, target_fps: float | None) -> MocapClip:
              "head": pts["head"], "neck": 0.5 * (thorax + pts["head"])}
     joints = np.stack([trunk[n] if n in trunk else pts[n] for n in JOINT_NAMES], axis=1)
 
-    source_fps = float(1.0 / np.median(dts))
     fps = float(target_fps) if target_fps is not None else source_fps
     new_t = np.arange(0.0, times[-1] + 1e-9, 1.0 / fps)
+    if len(new_t) < 2:
+        raise PhysposeError(f"the clip lasts {times[-1]:g} s: under two frames at {fps:g} Hz",
+                            path=motion.source, remedy="use a longer clip")
     joints, head_top = resample(times, joints, new_t), resample(times, pts["head_top"], new_t)
     head_rot = orthonormalize(resample(times, head_rot, new_t))
     hand_rot = orthonormalize(resample(times, hand_rot, new_t))

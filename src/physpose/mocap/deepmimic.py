@@ -15,6 +15,7 @@ sphere's top.
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -55,6 +56,9 @@ def _read_json(path: Path) -> dict:
     except json.JSONDecodeError as exc:
         raise PhysposeError(f"line {exc.lineno}: not valid JSON ({exc.msg})", path=path,
                             remedy=_REMEDY) from None
+    except (UnicodeDecodeError, RecursionError) as exc:
+        raise PhysposeError(f"not a UTF-8 JSON file ({exc})", path=path,
+                            remedy=_REMEDY) from None
 
 
 def _character(path: Path) -> tuple[list[dict], dict[int, dict]]:
@@ -65,7 +69,13 @@ def _character(path: Path) -> tuple[list[dict], dict[int, dict]]:
     except (KeyError, TypeError) as exc:
         raise PhysposeError(f"character file lacks Skeleton/Joints ({exc})", path=path,
                             remedy=_REMEDY) from None
+    need = ("ID", "Name", "Type", "Parent", "AttachX", "AttachY", "AttachZ")
     for k, j in enumerate(joints):
+        if not isinstance(j, dict) or any(key not in j for key in need) or not all(
+                isinstance(j[key], (int, float)) and math.isfinite(j[key])
+                for key in need if key not in ("Name", "Type")):
+            raise PhysposeError(f"Skeleton/Joints[{k}] needs the numbers ID, Parent, AttachX/Y/Z, "
+                                "a Name and a Type", path=path, remedy=_REMEDY)
         if j["ID"] != k or not (j["Parent"] < k):
             raise PhysposeError(f"joint {j.get('Name')!r}: IDs must be 0..N-1 with parents first",
                                 path=path, remedy=_REMEDY)
@@ -94,7 +104,13 @@ def load_deepmimic(path: str | Path, target_fps: float | None = 25.0,
             raise PhysposeError(f"Frames[{k}] has {len(row) if isinstance(row, list) else '?'} "
                                 f"values, the character {char_path.name} needs {width}",
                                 path=path, frame=k, remedy=_REMEDY)
-    data = np.asarray(frames, dtype=float)
+    try:
+        data = np.asarray(frames, dtype=float)
+    except (TypeError, ValueError):
+        k = next(k for k, row in enumerate(frames)
+                 if not all(isinstance(v, (int, float)) or v is None for v in row))
+        raise PhysposeError(f"Frames[{k}] holds something other than numbers", path=path,
+                            frame=k, remedy=_REMEDY) from None
     if not np.isfinite(data).all():
         raise PhysposeError("non-finite values", path=path,
                             frame=int(np.argmax(~np.isfinite(data).all(1))), remedy=_REMEDY)
@@ -155,16 +171,21 @@ def _motion(path, char_path, times, joints, bodies, pos, rot) -> SkeletonMotion:
             points[f"{s}_{part}"] = pos[:, at(f"{side}_{part}")]
         ankle = at(f"{side}_ankle")
         foot = bodies.get(ankle)
-        if foot is None or foot.get("Shape") != "box":
-            raise PhysposeError(f"the {side} ankle has no box foot body", path=char_path)
+        if foot is None or foot.get("Shape") != "box" or any(
+                k not in foot for k in ("AttachX", "AttachY", "AttachZ", "Param0", "Param1",
+                                        "Param2")):
+            raise PhysposeError(f"the {side} ankle has no box foot body (Shape box, AttachX/Y/Z, "
+                                "Param0-2)", path=char_path, remedy=_REMEDY)
         centre = np.array([foot["AttachX"], foot["AttachY"], foot["AttachZ"]])
         half = 0.5 * np.array([foot["Param0"], foot["Param1"], foot["Param2"]])
         points[f"{s}_heel"] = local(ankle, centre + [-half[0], -half[1], 0.0])
         points[f"{s}_toe"] = local(ankle, centre + [half[0], -half[1], 0.0])
     neck = at("neck")
     head = bodies.get(neck)
-    if head is None or head.get("Shape") != "sphere":
-        raise PhysposeError("the neck joint has no sphere head body", path=char_path)
+    if head is None or head.get("Shape") != "sphere" or any(
+            k not in head for k in ("AttachX", "AttachY", "AttachZ", "Param0")):
+        raise PhysposeError("the neck joint has no sphere head body (Shape sphere, AttachX/Y/Z, "
+                            "Param0)", path=char_path, remedy=_REMEDY)
     head_centre = np.array([head["AttachX"], head["AttachY"], head["AttachZ"]])
     points["head"] = local(neck, head_centre)
     points["head_top"] = local(neck, head_centre + [0.0, 0.5 * head["Param0"], 0.0])

@@ -37,7 +37,8 @@ def quat_matrix(quat_wxyz: np.ndarray) -> np.ndarray:
     quat_wxyz: (..., 4) w, x, y, z -> (..., 3, 3).
     """
     q = np.asarray(quat_wxyz, dtype=float)
-    q = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):  # a zero quaternion: NaN, which the
+        q = q / np.linalg.norm(q, axis=-1, keepdims=True)  # loaders report with its frame
     w, x, y, z = np.moveaxis(q, -1, 0)
     return np.stack([
         np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], -1),
