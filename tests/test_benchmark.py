@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,7 +15,8 @@ from physpose.benchmark.material import (Clip, Material, MaterialConfig, _observ
                                          crop_mocap, load_clips, mocap_clip, uniform_fps)
 from physpose.benchmark.oracle import FOOT_LANDMARKS, SOLE_JOINTS, STANCE_HEIGHT, truth_on_body
 from physpose.benchmark.report import aggregate, render_markdown
-from physpose.benchmark.runner import BenchmarkConfig, results_document, run_clips, run_variant
+from physpose.benchmark.runner import (BenchmarkConfig, results_document, run_benchmark, run_clips,
+                                      run_variant)
 from physpose.benchmark.scoring import TRUTH_ROW, truth_record
 from physpose.cli import main
 from physpose.errors import PhysposeError
@@ -457,3 +460,30 @@ def test_dynamics_truth_follows_the_truth_with_physics(truth_clip):
     assert record["metrics"]["restarts"] == 0.0
     assert record["metrics"]["fallen_pct"] == 0.0
     assert record["metrics"]["mpjpe_g_mm"] < 150.0
+
+
+def test_a_run_stopped_midway_keeps_the_material_it_finished(clip, tmp_path, monkeypatch):
+    """The results so far are written after each piece of material; a bug (or Ctrl-C) on a
+    later one leaves them, marked as incomplete, instead of nothing."""
+    monkeypatch.setattr("physpose.benchmark.runner.load_clips",
+                        lambda material, cfg: [replace(clip, name=material.path.stem)])
+    oracle = _oracle(clip)
+
+    def breaks_on_the_second(obs, context):
+        if breaks_on_the_second.calls:
+            raise ZeroDivisionError
+        breaks_on_the_second.calls += 1
+        return oracle(obs, context)
+    breaks_on_the_second.calls = 0
+    monkeypatch.setitem(VARIANTS, "test_breaks", breaks_on_the_second)
+    out = tmp_path / "out"
+    materials = [Material("mocap", Path(f"{name}.bvh")) for name in ("first", "second", "third")]
+    with pytest.raises(ZeroDivisionError):
+        run_benchmark(materials, BenchmarkConfig(variants=("test_breaks",)), log=lambda m: None,
+                      on_progress=lambda doc: write_results(doc, out))
+    kept = json.loads((out / "results.json").read_text())
+    assert [(r["clip"], r["variant"]) for r in kept["results"]] == [
+        ("first", TRUTH_ROW), ("first", "test_breaks")]
+    assert kept["pending"] == ["second.bvh", "third.bvh"]
+    assert "**Incomplete**" in (out / "results.md").read_text()
+    assert sorted(p.name for p in out.iterdir()) == ["results.json", "results.md"]

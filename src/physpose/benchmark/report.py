@@ -6,6 +6,7 @@ import math
 from collections import defaultdict
 from pathlib import Path
 
+from physpose.cache import atomic_path
 from physpose.json_text import strict_json
 
 # (column title, key in a result's "metrics" or "ground" dict, format); the paper's Table 2 order.
@@ -98,6 +99,11 @@ def render_markdown(doc: dict) -> str:
     if slow != 1:
         lines += [f"Motion capture played as {slow}x slow footage, not declared to the "
                   f"variants; one frame in {slow} scored, on the real clock.", ""]
+    pending = doc.get("pending", [])
+    if pending:
+        lines += [f"**Incomplete**: written while the run went on, before {len(pending)} more "
+                  f"piece(s) of material: {', '.join(pending)}. Run the same command again "
+                  "for all of it (the stage caches keep the work done).", ""]
     for message in doc.get("skipped", []):
         lines.append(f"- skipped: {message}")
     for failure in doc.get("failures", []):
@@ -172,10 +178,9 @@ def write_results(doc: dict, out_dir: str | Path) -> tuple[Path, Path]:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     json_path, md_path = out / "results.json", out / "results.md"
-    tmp = json_path.with_suffix(".json.partial")
-    tmp.write_text(results_json(doc) + "\n")
-    tmp.replace(json_path)
-    md_path.write_text(render_markdown(doc) + "\n")
+    for path, text in ((json_path, results_json(doc)), (md_path, render_markdown(doc))):
+        with atomic_path(path) as tmp:  # rewritten as the run goes on: never half a file
+            tmp.write_text(text + "\n")
     return json_path, md_path
 
 

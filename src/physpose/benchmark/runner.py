@@ -92,15 +92,18 @@ def run_clips(clips: Sequence[Clip], variants: Sequence[str],
 
 
 def results_document(results: list[dict], failures: list[dict], cfg: BenchmarkConfig, *,
-                     skipped: Sequence[str] = (), command: str = "") -> dict:
+                     skipped: Sequence[str] = (), command: str = "",
+                     pending: Sequence[str] = ()) -> dict:
     """The document written to results.json (and rendered into results.md); with two or more
-    variants it pairs them against ``cfg.base`` clip by clip ("paired")."""
+    variants it pairs them against ``cfg.base`` clip by clip ("paired"). `pending`: the
+    material not run yet, where the document is written while the run goes on."""
     base = cfg.base
     return {
         "command": command,
         "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared with other work)",
         "config": asdict(cfg),
         "skipped": list(skipped),
+        "pending": list(pending),
         "failures": failures,
         "results": results,
         "aggregate": aggregate(results),
@@ -112,26 +115,33 @@ def results_document(results: list[dict], failures: list[dict], cfg: BenchmarkCo
 
 def run_benchmark(materials: Sequence[Material], cfg: BenchmarkConfig = BenchmarkConfig(), *,
                   skipped: Sequence[str] = (), command: str = "",
-                  log: Callable[[str], None] = _log) -> dict:
+                  log: Callable[[str], None] = _log,
+                  on_progress: Callable[[dict], None] | None = None) -> dict:
     """Run every variant of `cfg` on every clip of `materials`; returns the results document.
 
     Problems a user can fix on one clip (PhysposeError: unreadable file, person not found, a
     variant refusing its input) are recorded under "failures" and the run goes on; anything
-    else is a bug and propagates.
+    else is a bug and propagates. on_progress gets the document so far after each piece of
+    material (its "pending" naming the rest), so a run stopped midway (a bug, Ctrl-C, the
+    machine) keeps what it finished.
     """
     for name in cfg.variants:
         get_variant(name)  # unknown names fail before any work is done
     results: list[dict] = []
     failures: list[dict] = []
-    for material in materials:
+    for i, material in enumerate(materials):
         log(f"benchmark: preparing {material.kind} {material.path}")
         try:
             clips = load_clips(material, cfg.material)
         except PhysposeError as err:
             failures.append({"variant": "-", "clip": str(material.path), "error": str(err)})
             log(f"benchmark: failed: {err}")
-            continue
+            clips = []
         done, failed = run_clips(clips, cfg.variants, log)
         results += done
         failures += failed
+        if on_progress is not None and i + 1 < len(materials):
+            on_progress(results_document(results, failures, cfg, skipped=skipped,
+                                         command=command,
+                                         pending=[str(m.path) for m in materials[i + 1:]]))
     return results_document(results, failures, cfg, skipped=skipped, command=command)

@@ -69,7 +69,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "by clip (mean +- standard error of the per-clip differences; default: "
                         "the first --variant). `physpose compare` does the same across runs")
     p.add_argument("--out", type=Path, help="output folder for results.json and results.md "
-                                           "(required, but for --variant list)")
+                                           "(required, but for --variant list); both are "
+                                           "rewritten after each file or folder of material, "
+                                           "so a run stopped midway keeps what it finished")
     p.set_defaults(func=run)
 
 
@@ -128,7 +130,8 @@ def run(args: argparse.Namespace) -> int:
                             remedy="pass --mocap/--multiview/--video or fetch the shared data")
     command = shlex.join(["physpose", *sys.argv[1:]]) if sys.argv[1:2] == ["benchmark"] \
         else "physpose benchmark"
-    doc = run_benchmark(materials, cfg, skipped=skipped, command=command)
+    doc = run_benchmark(materials, cfg, skipped=skipped, command=command,
+                        on_progress=lambda partial: write_results(partial, args.out))
     json_path, md_path = write_results(doc, args.out)
     print(render_markdown(doc))
     print(f"wrote {json_path}\nwrote {md_path}")
