@@ -163,3 +163,12 @@ def test_the_same_variant_in_two_runs_is_compared_by_run(tmp_path, capsys):
                        tmp_path / "c" / "a"]) == ["a#1", "b", "x", "a#2"]
     merged = merge_results([{"results": rows}], ["r"])
     assert {r["variant"] for r in merged} == {TRUTH_ROW, "base@r", "new@r"}
+
+
+def test_compare_notes_a_run_written_before_it_finished(tmp_path, capsys):
+    rows = _results()
+    doc = results_document(rows, [], BenchmarkConfig(variants=("base", "new")),
+                           pending=["later.bvh"])
+    path = write_results(doc, tmp_path / "partial")[0]
+    assert main(["compare", str(path), "--base", "base"]) == 0
+    assert "incomplete, 1 piece(s) of material still to come" in capsys.readouterr().err

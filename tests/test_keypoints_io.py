@@ -229,3 +229,11 @@ def test_a_camera_matrix_that_is_not_a_pinhole_is_blamed_on_the_file(tmp_path):
 
 def test_another_format_is_refused(tmp_path):
     assert "is not physpose-keypoints version 1" in _error(tmp_path, _doc(format="coco"))
+
+
+def test_timestamps_of_frames_picked_at_a_lower_rate_load(tmp_path):
+    """`physpose observe --fps 20` on a 30 fps video keeps frames 0, 2, 3, 5, 6, 8
+    (video.plan_frames): their median step says 15 frames a second, their mean 20."""
+    times = np.array([0, 2, 3, 5, 6, 8]) / 30.0
+    obs = load_keypoints(_write_json(tmp_path, _doc(fps=20.0, timestamps=times.tolist())))
+    np.testing.assert_allclose(obs.timestamps, times)

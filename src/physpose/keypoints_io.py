@@ -114,9 +114,10 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
         fail("landmark_names differ from MediaPipe's 33-landmark order",
              "reorder the keypoints to MediaPipe Pose order")
 
-    if str(np.asarray(raw.get("format", "physpose-keypoints"))) != "physpose-keypoints" \
-            or _number(raw.get("format_version", 1)) != 1:
-        fail(f"format {raw.get('format')!r} version {raw.get('format_version')!r} is not "
+    fmt, version = (raw.get(k) for k in ("format", "format_version"))
+    fmt, version = (None if v is None else np.asarray(v).tolist() for v in (fmt, version))
+    if fmt not in (None, "physpose-keypoints") or version not in (None, 1):
+        fail(f"format {fmt!r} version {version!r} is not "
              "physpose-keypoints version 1", "leave format and format_version out, or write "
              "\"physpose-keypoints\" and 1")
     fps = _number(raw["fps"])
@@ -174,8 +175,11 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
     elif t > 1 and np.any(np.diff(ts) <= 0):
         fail("timestamps are not strictly increasing",
              "give one increasing time in seconds per frame", int(np.argmax(np.diff(ts) <= 0)) + 1)
-    elif t > 1 and abs(float(np.median(np.diff(ts))) * fps - 1) > 0.25:
-        fail(f"timestamps are {1 / float(np.median(np.diff(ts))):g} frames a second, fps says "
+    elif t > 1 and min(abs(step * fps - 1) for step in (
+            float(np.median(np.diff(ts))), (ts[-1] - ts[0]) / (t - 1))) > 0.25:
+        # the mean step too: frames picked from a 30 fps video at 20 fps are 1 and 2 source
+        # frames apart (video.plan_frames), whose median is 15 or 30 frames a second
+        fail(f"timestamps are {(t - 1) / (ts[-1] - ts[0]):g} frames a second, fps says "
              f"{fps:g}", "make fps the rate of the frames, or leave timestamps out")
     detected = per_frame["detected"]
     detected = (conf > 0).any(axis=1) if detected is None else detected.astype(bool)

@@ -13,6 +13,7 @@ PNG frame and the exports, all into the result folder.
 from __future__ import annotations
 
 import logging
+import math
 from pathlib import Path
 
 import numpy as np
@@ -75,10 +76,14 @@ def metrics_table(metrics: dict[str, dict[str, float]]) -> str:
     lines = [f"  {'metric':<{width}}" + "".join(f"{m:>12}" for m in motions)]
     for key, label in METRIC_LABELS.items():
         if any(key in metrics[m] for m in motions):
-            cells = "".join(f"{metrics[m][key]:>12.3g}" if metrics[m].get(key) is not None
+            cells = "".join(f"{metrics[m][key]:>12.3g}" if _defined(metrics[m].get(key))
                             else f"{'-':>12}" for m in motions)  # null: not a number
             lines.append(f"  {label:<{width}}{cells}")
     return "\n".join(lines)
+
+
+def _defined(value) -> bool:
+    return value is not None and math.isfinite(value)
 
 
 def _source_image_size(rec: Reconstruction, video: Path | None) -> list[int] | None:

@@ -70,8 +70,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "the first --variant). `physpose compare` does the same across runs")
     p.add_argument("--out", type=Path, help="output folder for results.json and results.md "
                                            "(required, but for --variant list); both are "
-                                           "rewritten after each file or folder of material, "
-                                           "so a run stopped midway keeps what it finished")
+                                           "rewritten after each file or folder of material "
+                                           "(an earlier run's there are replaced), so a run "
+                                           "stopped midway keeps what it finished")
     p.set_defaults(func=run)
 
 

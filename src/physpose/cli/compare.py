@@ -60,6 +60,11 @@ def run(args: argparse.Namespace) -> int:
     if len(configs) > 1:
         print("physpose compare: note: the runs prepared their material differently (seed, "
               "length, camera...); their clips are compared as they are", file=sys.stderr)
+    for path, doc in zip(args.results, docs):
+        if doc.get("pending"):  # written while its run went on (stopped, or still running)
+            print(f"physpose compare: note: {path} is incomplete, {len(doc['pending'])} piece(s) "
+                  "of material still to come; only the clips it finished are compared",
+                  file=sys.stderr)
     paired = paired_differences(results, args.base, variants)
     if not paired:
         raise PhysposeError(f"no clip has both {args.base!r} and another variant",

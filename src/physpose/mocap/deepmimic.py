@@ -61,6 +61,14 @@ def _read_json(path: Path) -> dict:
                             remedy=_REMEDY) from None
 
 
+def _floats(row: list) -> bool:
+    try:
+        np.asarray(row, dtype=float)
+    except (TypeError, ValueError, OverflowError):
+        return False
+    return True
+
+
 def _character(path: Path) -> tuple[list[dict], dict[int, dict]]:
     data = _read_json(path)
     try:
@@ -106,9 +114,8 @@ def load_deepmimic(path: str | Path, target_fps: float | None = 25.0,
                                 path=path, frame=k, remedy=_REMEDY)
     try:
         data = np.asarray(frames, dtype=float)
-    except (TypeError, ValueError):
-        k = next(k for k, row in enumerate(frames)
-                 if not all(isinstance(v, (int, float)) or v is None for v in row))
+    except (TypeError, ValueError, OverflowError):  # Overflow: an integer of 309+ digits
+        k = next(k for k, row in enumerate(frames) if not _floats(row))
         raise PhysposeError(f"Frames[{k}] holds something other than numbers", path=path,
                             frame=k, remedy=_REMEDY) from None
     if not np.isfinite(data).all():
