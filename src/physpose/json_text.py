@@ -6,6 +6,9 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
+
+from physpose.errors import PhysposeError
 
 
 def strict_json(doc, **dumps_options) -> str:
@@ -23,3 +26,19 @@ def _finite(value):
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+def read_json_file(path: str | Path, remedy: str):
+    """The JSON document in a file, or a PhysposeError naming the file (and the line of a
+    syntax error) with `remedy`: unreadable, not UTF-8, not JSON, nested too deep."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except OSError as exc:
+        raise PhysposeError(f"cannot read file ({exc})", path=path, remedy=remedy) from None
+    except json.JSONDecodeError as exc:
+        raise PhysposeError(f"line {exc.lineno}: not valid JSON ({exc.msg})", path=path,
+                            remedy=remedy) from None
+    except (UnicodeDecodeError, RecursionError) as exc:
+        raise PhysposeError(f"not a UTF-8 JSON file ({exc})", path=path,
+                            remedy=remedy) from None

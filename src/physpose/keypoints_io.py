@@ -16,6 +16,7 @@ import numpy as np
 from physpose.cache import UNREADABLE_NPZ, atomic_path, npz_arrays
 from physpose.errors import PhysposeError, about
 from physpose.joints import LANDMARK_NAMES, NUM_LANDMARKS
+from physpose.json_text import read_json_file
 from physpose.observations import CAMERA_MOTIONS, SURE_CONFIDENCE, Observations
 
 KEYPOINTS_EXTENSIONS = (".json", ".npz")
@@ -79,11 +80,7 @@ def save_keypoints(obs: Observations, path: str | Path) -> Path:
 
 
 def _read_json(path: Path) -> dict[str, Any]:
-    try:
-        doc = json.loads(path.read_text())
-    except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
-        raise PhysposeError(f"not valid JSON ({exc})", path=path,
-                            remedy="fix the file; " + _DOC) from None
+    doc = read_json_file(path, remedy="fix the file; " + _DOC)
     if not isinstance(doc, dict):
         raise PhysposeError("the JSON top level must be an object with keys "
                             + ", ".join(_REQUIRED), path=path, remedy=_DOC)

@@ -14,13 +14,13 @@ sphere's top.
 
 from __future__ import annotations
 
-import json
 import math
 from pathlib import Path
 
 import numpy as np
 
 from physpose.errors import PhysposeError
+from physpose.json_text import read_json_file
 from physpose.mocap.common import SIDES, MocapClip, SkeletonMotion, finish_clip
 from physpose.mocap.rotations import axis_rotation, quat_matrix
 
@@ -49,16 +49,7 @@ def find_character(clip_path: Path, character: str | Path | None = None) -> Path
 
 
 def _read_json(path: Path) -> dict:
-    try:
-        return json.loads(path.read_text())
-    except OSError as exc:
-        raise PhysposeError(f"cannot read file ({exc})", path=path) from None
-    except json.JSONDecodeError as exc:
-        raise PhysposeError(f"line {exc.lineno}: not valid JSON ({exc.msg})", path=path,
-                            remedy=_REMEDY) from None
-    except (UnicodeDecodeError, RecursionError) as exc:
-        raise PhysposeError(f"not a UTF-8 JSON file ({exc})", path=path,
-                            remedy=_REMEDY) from None
+    return read_json_file(path, remedy=_REMEDY)
 
 
 def _floats(row: list) -> bool:
