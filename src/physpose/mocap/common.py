@@ -136,6 +136,43 @@ def rotation_to_z_up(up: np.ndarray) -> np.ndarray:
     return np.eye(3) + k + k @ k  # Rodrigues for a 90-degree turn (up is orthogonal to z)
 
 
+def _check_finite(motion: SkeletonMotion) -> None:
+    """Refuse a NaN or infinite value (or a zero quaternion's NaN) with its file frame."""
+    for key, value in [*motion.points.items(), ("head_rot", motion.head_rot),
+                       ("hand_rot", motion.hand_rot)]:
+        bad = ~np.isfinite(value.reshape(len(value), -1)).all(axis=1)
+        if bad.any():
+            raise PhysposeError(f"{key} is not finite (a NaN or infinite value, or a zero-length "
+                                "quaternion, in the file)", path=motion.source,
+                                frame=int(np.argmax(bad)) + motion.leading_frames_dropped,
+                                remedy="fix or cut that frame of the file (frames count from 0)")
+
+
+def _source_rate(times: np.ndarray, source: str, first_frame: int) -> float:
+    """The file's own frame rate (median step), after checking its frame times: increasing,
+    finite, at 1-2000 Hz and without a gap over MAX_GAP_S (which would resample into
+    millions of frames). Errors count frames from `first_frame`, the file's index of times[0]."""
+    dts = np.diff(times)
+    if len(times) < 2 or not np.isfinite(times).all() or (dts <= 0).any():
+        bad = int(np.argmax(~(np.isfinite(dts) & (dts > 0)))) + 1 if len(dts) else None
+        raise PhysposeError("frame times must increase (at least two frames)", path=source,
+                            frame=None if bad is None else bad + first_frame, remedy="give each frame a positive, finite frame time")
+    source_fps = float(1.0 / np.median(dts))
+    lo, hi = SOURCE_FPS_RANGE
+    if not lo <= source_fps <= hi:
+        raise PhysposeError(f"the file's frame rate {source_fps:g} Hz is outside {lo:g}-{hi:g} "
+                            "Hz", path=source,
+                            remedy="check the frame time, in seconds per frame (BVH 'Frame "
+                                   "Time:', a DeepMimic row's first value; 0.008333 for 120 Hz)")
+    gap = int(np.argmax(dts))
+    if dts[gap] > MAX_GAP_S:
+        raise PhysposeError(f"{dts[gap]:g} s between frames {gap + first_frame} and "
+                            f"{gap + 1 + first_frame}", path=source, frame=gap + 1 + first_frame,
+                            remedy=f"a capture has no gaps over {MAX_GAP_S:g} s: fix the frame's "
+                                   "time step")
+    return source_fps
+
+
 def finish_clip(motion: SkeletonMotion, target_fps: float | None) -> MocapClip:
     """Z up, trunk joints, floor at z = 0 and a uniform rate (`target_fps`; None keeps the file's)."""
     if target_fps is not None and not (math.isfinite(target_fps)
@@ -147,38 +184,14 @@ def finish_clip(motion: SkeletonMotion, target_fps: float | None) -> MocapClip:
     missing = set(ANATOMICAL_POINTS) - motion.points.keys()
     if missing:
         raise PhysposeError(f"reader produced no {sorted(missing)}", path=motion.source)
-    for key, value in [*motion.points.items(), ("head_rot", motion.head_rot),
-                       ("hand_rot", motion.hand_rot)]:
-        bad = ~np.isfinite(value.reshape(len(value), -1)).all(axis=1)
-        if bad.any():
-            raise PhysposeError(f"{key} is not finite (a NaN or infinite value, or a zero-length "
-                                "quaternion, in the file)", path=motion.source,
-                                frame=int(np.argmax(bad)) + motion.leading_frames_dropped,
-                                remedy="fix or cut that frame of the file (frames count from 0)")
+    _check_finite(motion)
     r = rotation_to_z_up(motion.up)
     pts = {k: v @ r.T for k, v in motion.points.items()}
     head_rot = r @ motion.head_rot
     hand_rot = r @ motion.hand_rot
 
     times = motion.times - motion.times[0]
-    dts = np.diff(times)
-    if len(times) < 2 or not np.isfinite(times).all() or (dts <= 0).any():
-        bad = int(np.argmax(~(np.isfinite(dts) & (dts > 0)))) + 1 if len(dts) else None
-        raise PhysposeError("frame times must increase (at least two frames)", path=motion.source,
-                            frame=bad, remedy="give each frame a positive, finite frame time")
-    source_fps = float(1.0 / np.median(dts))
-    lo, hi = SOURCE_FPS_RANGE
-    if not lo <= source_fps <= hi:
-        raise PhysposeError(f"the file's frame rate {source_fps:g} Hz is outside {lo:g}-{hi:g} "
-                            "Hz", path=motion.source,
-                            remedy="check the frame time, in seconds per frame (BVH 'Frame "
-                                   "Time:', a DeepMimic row's first value; 0.008333 for 120 Hz)")
-    gap = int(np.argmax(dts))
-    if dts[gap] > MAX_GAP_S:
-        raise PhysposeError(f"{dts[gap]:g} s between frames {gap} and {gap + 1}",
-                            path=motion.source, frame=gap + 1,
-                            remedy=f"a capture has no gaps over {MAX_GAP_S:g} s: fix the frame's "
-                                   "time step")
+    source_fps = _source_rate(times, motion.source, motion.leading_frames_dropped)
     floor = estimate_floor(pts, times)
     for v in pts.values():
         v[:, 2] -= floor
