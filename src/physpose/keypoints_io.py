@@ -95,6 +95,43 @@ def _read_npz(path: Path) -> dict[str, Any]:
                             remedy="write it with numpy.savez (no object arrays); " + _DOC) from None
 
 
+def _homographies(raw: dict[str, Any], kp: np.ndarray, seen: np.ndarray, fail
+                  ) -> np.ndarray | None:
+    """The (T, 3, 3) camera maps, if given: finite, invertible, and keeping every keypoint of
+    a frame with landmarks (`seen`) in front of the camera, as map_keypoints maps them."""
+    if raw.get("homographies") is None:
+        return None
+    t = len(kp)
+    maps = _array(raw["homographies"], "homographies", fail)
+    if maps.shape != (t, 3, 3) or not np.isfinite(maps).all():
+        fail(f"homographies has shape {maps.shape} or non-finite values, expected "
+             f"({t}, 3, 3)", "give one 3x3 map per frame, or leave homographies out")
+    xy1 = np.concatenate([kp[..., :2], np.ones((t, NUM_LANDMARKS, 1))], axis=-1)
+    w = np.einsum("tj,tnj->tn", maps[:, 2], xy1)
+    bad = (np.abs(np.linalg.det(maps)) < 1e-12) | (seen & ~(w > 1e-9).all(axis=1))
+    if bad.any():
+        fail("a homography is singular or maps a keypoint to infinity",
+             "give each frame an invertible map of the middle frame's pixels to its own",
+             int(np.argmax(bad)))
+    return maps
+
+
+def _masks(raw: dict[str, Any], fail) -> np.ndarray | None:
+    """The person masks, if given: a rectangular array of numbers 0-255."""
+    if raw.get("masks") is None:
+        return None
+    try:
+        masks = np.asarray(raw["masks"])
+    except ValueError:
+        fail("masks is not a rectangular array", "give masks as (T, h, w) uint8, or leave "
+             "them out")
+    if masks.dtype.kind not in "biuf" or not np.isfinite(masks).all() \
+            or masks.min(initial=0) < 0 or masks.max(initial=0) > 255:
+        fail("masks must hold numbers 0-255 (person probability x 255)",
+             "give masks as (T, h, w) uint8, or leave them out")
+    return masks
+
+
 def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
     def fail(problem: str, remedy: str, frame: int | None = None) -> None:
         raise PhysposeError(problem, path=path, frame=frame, remedy=remedy + " (" + _DOC + ")")
@@ -191,37 +228,13 @@ def _to_observations(raw: dict[str, Any], path: Path) -> Observations:
                                  or not np.allclose(camera_k[2], [0, 0, 1])):
         fail(f"camera_K {camera_k.tolist()} is not a pinhole matrix (fx, fy > 0, last row "
              "0 0 1)", "give the intrinsics [[fx,0,cx],[0,fy,cy],[0,0,1]] in pixels")
-    homographies = None if raw.get("homographies") is None else \
-        _array(raw["homographies"], "homographies", fail)
-    if homographies is not None and (homographies.shape != (t, 3, 3)
-                                     or not np.isfinite(homographies).all()):
-        fail(f"homographies has shape {homographies.shape} or non-finite values, expected "
-             f"({t}, 3, 3)", "give one 3x3 map per frame, or leave homographies out")
-    if homographies is not None:
-        xy1 = np.concatenate([kp[..., :2], np.ones((t, NUM_LANDMARKS, 1))], axis=-1)
-        w = np.einsum("tj,tnj->tn", homographies[:, 2], xy1)
-        bad = (np.abs(np.linalg.det(homographies)) < 1e-12) \
-            | ((detected | interpolated) & ~(w > 1e-9).all(axis=1))  # as map_keypoints maps
-        if bad.any():
-            fail("a homography is singular or maps a keypoint to infinity",
-                 "give each frame an invertible map of the middle frame's pixels to its own",
-                 int(np.argmax(bad)))
+    homographies = _homographies(raw, kp, detected | interpolated, fail)
     motion = raw.get("camera_motion")
     motion = None if motion is None else str(np.asarray(motion))
     if motion is not None and motion not in CAMERA_MOTIONS:
         fail(f"camera_motion {motion!r} is not one of {', '.join(CAMERA_MOTIONS)}",
              "leave camera_motion out, or write what `physpose observe` wrote")
-    masks = raw.get("masks")
-    if masks is not None:
-        try:
-            masks = np.asarray(masks)
-        except ValueError:
-            fail("masks is not a rectangular array", "give masks as (T, h, w) uint8, or leave "
-                 "them out")
-        if masks.dtype.kind not in "biuf" or not np.isfinite(masks).all() \
-                or masks.min(initial=0) < 0 or masks.max(initial=0) > 255:
-            fail("masks must hold numbers 0-255 (person probability x 255)",
-                 "give masks as (T, h, w) uint8, or leave them out")
+    masks = _masks(raw, fail)
     source = raw.get("source")
     recorded = str(path) if source is None else str(np.asarray(source))
     with about(path, instead_of=recorded):  # the checks name the recorded video, not this file
