@@ -43,7 +43,8 @@ def _frame_cells(rec: Reconstruction, physics: bool) -> list[tuple[str, ...]]:
     """Per frame, the VIDEO_COLUMNS and FLAG_COLUMNS cells (empty where the result does not
     record them; the physics flags only for `physics` rows of a result with physics)."""
     frames, times = rec.video_frames, rec.video_times
-    flags = [frame_flags(rec, physics)[name] for name in FLAG_COLUMNS]
+    by_name = frame_flags(rec, physics)
+    flags = [by_name[name] for name in FLAG_COLUMNS]
     return [("" if frames is None else str(int(frames[t])),
              "" if times is None else f"{times[t]:.6f}",
              *("" if flag is None else str(int(flag[t])) for flag in flags))
