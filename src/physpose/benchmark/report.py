@@ -176,10 +176,9 @@ def render_paired(paired: dict, base: str) -> list[str]:
 def write_results(doc: dict, out_dir: str | Path) -> tuple[Path, Path]:
     """Write `results.json` and `results.md` into out_dir; returns their paths."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     json_path, md_path = out / "results.json", out / "results.md"
     for path, text in ((json_path, results_json(doc)), (md_path, render_markdown(doc))):
-        with atomic_path(path) as tmp:  # rewritten as the run goes on: never half a file
+        with atomic_path(path) as tmp:  # makes out; rewritten as the run goes: never half a file
             tmp.write_text(text + "\n")
     return json_path, md_path
 
