@@ -23,8 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from physpose.errors import PhysposeError
-from physpose.mocap.bvh import REST_EXTENT
-from physpose.mocap.common import MocapClip, finish_clip, line_error, read_lines
+from physpose.mocap.common import REST_EXTENT, MocapClip, finish_clip, line_error, read_lines
 from physpose.mocap.rotations import euler_matrix
 from physpose.mocap.skeleton import motion_from_tree
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from physpose.errors import PhysposeError
-from physpose.mocap.common import MocapClip, finish_clip, line_error, read_lines
+from physpose.mocap.common import REST_EXTENT, MocapClip, finish_clip, line_error, read_lines
 from physpose.mocap.rotations import euler_matrix
 from physpose.mocap.skeleton import motion_from_tree
 
@@ -181,7 +181,6 @@ def bvh_forward_kinematics(bvh: BvhFile, scale: float = 1.0) -> tuple[np.ndarray
 # millimetres, inches, and CMU's (its ASF "length 0.45": 1/0.45 inch, kept by the widely used
 # cgspeed BVH conversion of the CMU database, whose people span about 30 units).
 LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "cmu": 0.0254 / 0.45}
-REST_EXTENT = (0.7, 2.3)    # m, plausible largest rest-pose extent of a person (height or span)
 TYPICAL_EXTENT = 1.6        # m, an adult's
 
 

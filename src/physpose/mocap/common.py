@@ -36,6 +36,7 @@ START_JUMP_RATIO = 4.0
 START_JUMP_WITHIN = 1.0  # s
 SOURCE_FPS_RANGE = (1.0, 2000.0)  # Hz, a motion file's own rate (median frame step)
 MAX_GAP_S = 1.0          # s, the longest step between two frames of a capture
+REST_EXTENT = (0.7, 2.3)  # m, plausible largest rest-pose extent of a person (height or span)
 # Rigid segments (constant length in every clip): thigh, shin, heel, upper arm, forearm, pelvis.
 BONES: tuple[tuple[str, str], ...] = tuple(
     (f"{s}_{a}", f"{s}_{b}") for s in SIDES for a, b in (
