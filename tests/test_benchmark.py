@@ -360,6 +360,23 @@ def test_the_camera_azimuth_moves_the_virtual_camera():
     assert angle == pytest.approx(60.0, abs=5.0)  # 30 -> 90 degrees about the vertical
 
 
+def test_the_camera_height_raises_the_virtual_camera_to_look_down():
+    level = mocap_clip(_walk(), MaterialConfig(max_seconds=0.4), name="walk")
+    high = mocap_clip(_walk(), MaterialConfig(max_seconds=0.4, camera_height=3.0), name="walk")
+    for clip, height in ((level, 1.3), (high, 3.0)):
+        T = clip.truth.T_world2cam
+        centre = -T[:3, :3].T @ T[:3, 3]
+        assert centre[2] == pytest.approx(height)
+    pitch = np.degrees(np.arcsin(-high.truth.T_world2cam[2, 2]))  # view axis below horizontal
+    assert pitch > 10.0
+
+
+@pytest.mark.parametrize("height", [0.0, -1.0, float("nan"), 50.0])
+def test_a_camera_height_out_of_range_is_refused(height):
+    with pytest.raises(PhysposeError, match="--camera-height"):
+        MaterialConfig(camera_height=height)
+
+
 def test_cli_start_past_a_clips_end_is_a_failure_naming_the_file(tmp_path, monkeypatch):
     from physpose.benchmark import material as material_module
     monkeypatch.setattr(material_module, "load_mocap", lambda path, target_fps: _walk())

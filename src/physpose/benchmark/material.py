@@ -28,6 +28,7 @@ from physpose.paths import pose2sim_demo_dir, shared_data_dir
 from physpose.video import VIDEO_EXTENSIONS, probe
 
 KINDS = ("mocap", "multiview", "video")
+CAMERA_HEIGHT_RANGE = (0.1, 20.0)  # m, mocap's virtual camera above the floor
 MAX_SLOW_MOTION = 16  # the slowest footage the benchmark plays motion capture as (x real time)
 
 
@@ -39,6 +40,7 @@ class MaterialConfig:
     max_seconds: float = 4.0      # s, clip length cap (the paper's clips are 100 frames at 25 Hz)
     start_seconds: float = 0.0    # s, where each clip begins (later segments: held-out material)
     camera_azimuth_deg: float = DetectorSimConfig.azimuth_deg  # mocap's camera, deg (0: in front)
+    camera_height: float = DetectorSimConfig.height  # m, mocap's camera above the floor
     known_intrinsics: bool = True   # tell variants the camera K when the material has one
     known_extrinsics: bool = False  # tell variants the camera pose (then ground is not scored)
     known_height: bool = False    # tell variants the person's stature when the material has it
@@ -66,6 +68,11 @@ class MaterialConfig:
         if not math.isfinite(self.camera_azimuth_deg):
             raise PhysposeError(f"camera_azimuth_deg={self.camera_azimuth_deg} is not a number",
                                 remedy="pass --camera-azimuth in degrees, e.g. --camera-azimuth 60")
+        low, high = CAMERA_HEIGHT_RANGE
+        if not low <= self.camera_height <= high:  # NaN fails too
+            raise PhysposeError(f"camera_height={self.camera_height} m is outside {low}-{high} m",
+                                remedy="pass --camera-height in metres above the floor, e.g. "
+                                       "--camera-height 2.5")
 
 
 @dataclass(frozen=True, eq=False)
@@ -220,7 +227,7 @@ def mocap_clip(motion: MocapClip, cfg: MaterialConfig, name: str) -> Clip:
     plays X times slower than the motion happened."""
     start = time.perf_counter()
     motion = crop_mocap(motion, cfg.max_seconds, cfg.start_seconds)
-    camera = dict(seed=cfg.seed, azimuth_deg=cfg.camera_azimuth_deg)
+    camera = dict(seed=cfg.seed, azimuth_deg=cfg.camera_azimuth_deg, height=cfg.camera_height)
     detector = DetectorSimConfig.noiseless(**camera) if cfg.noiseless \
         else DetectorSimConfig(**camera)
     capture = simulate_detections(motion, detector)

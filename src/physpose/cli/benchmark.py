@@ -41,6 +41,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--camera-azimuth", type=float, default=MaterialConfig.camera_azimuth_deg,
                    metavar="DEG", help="motion capture's virtual camera, degrees from the "
                                        "subject's front towards its left (default: %(default)s)")
+    p.add_argument("--camera-height", type=float, default=MaterialConfig.camera_height,
+                   metavar="M", help="motion capture's virtual camera, metres above the floor; "
+                                     "it looks at the subject's mean pelvis, so a higher camera "
+                                     "looks down (default: %(default)s)")
     p.add_argument("--fps", type=float, default=MaterialConfig.fps,
                    help="analysis rate in Hz (videos use the nearest rate that is a whole "
                         "fraction of theirs; default: %(default)s)")
@@ -118,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
                           material=MaterialConfig(fps=args.fps, max_seconds=args.max_seconds,
                                                   start_seconds=args.start,
                                                   camera_azimuth_deg=args.camera_azimuth,
+                                                  camera_height=args.camera_height,
                                                   known_extrinsics=args.known_extrinsics,
                                                   known_height=args.known_height,
                                                   seed=args.seed, noiseless=args.noiseless,
