@@ -49,7 +49,7 @@ from physpose.observations import Observations
 from physpose.shape import BodyShape
 from physpose.skeleton import NQ
 
-KINEMATICS_VERSION = 12  # bump when a change alters the result for the same input and config
+KINEMATICS_VERSION = 14  # bump when a change alters the result for the same input and config
 _log = logging.getLogger(__name__)
 Log = Callable[[str], None]
 

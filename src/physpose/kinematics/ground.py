@@ -13,13 +13,17 @@ is up, and crouching or bending frames count less too) and a weak one that the c
 about its optical axis is small. The balance term is averaged over all frames, so a clip with
 many low frames has a weaker prior. The rise is measured along the candidate normal, so the
 weights change as the search moves. The plane is searched from several starts (the level
-camera's up, the mean balance direction, the normal of the lowest foot points), each also with
-the level camera's up reversed, and the best minimum wins. The reversed starts find the floor
-under a camera held upside down (rolled by about a half turn, with no rotation tag in the
-video), which sees the person head-down: from the level camera's up alone, the floor of three
-simulated clips came out upside down at rolls of 150 and 180 degrees, the head 1.2-1.4 m below
-the ankles. Where the camera is upright, the reversed floor (the person standing on a ceiling,
-the feet off it) is far worse in the contact terms and costs the roll prior a half turn too.
+camera's up, the mean balance direction, the normal of the lowest foot points or, where these
+lie along a line at least a metre or so long, the plane through that line nearest the balance
+direction), each also with the level camera's up reversed, and the best minimum wins. Along
+the line of sight of a low camera a tilt towards it and the depth gain (below) nearly trade
+off, and the loss has minima several degrees off that the other starts can lead into. The
+reversed starts find the floor under a camera held upside down (rolled by about a half turn,
+with no rotation tag in the video), which sees the person head-down: from the level camera's
+up alone, the floor of three simulated clips came out upside down at rolls of 150 and 180
+degrees, the head 1.2-1.4 m below the ankles. Where the camera is upright, the reversed floor
+(the person standing on a ceiling, the feet off it) is far worse in the contact terms and
+costs the roll prior a half turn too.
 
 Monocular depth errors are correlated with the distance: on the pose2sim views the estimated
 depth varies 0.65-1.4 x as much as the true one. Feet at the wrong depth along their rays
@@ -106,15 +110,23 @@ def balance_directions(points: np.ndarray, com: np.ndarray, up: np.ndarray
 
 
 def _lowest_foot_normal(points: np.ndarray, feet: np.ndarray, fallback: np.ndarray) -> np.ndarray:
-    """Normal of the least-squares plane through each frame's lowest foot point."""
+    """Normal of the least-squares plane through each frame's lowest foot point. Where those
+    points lie along a line (a person walking straight on), the plane through that line
+    nearest `fallback`: the contacts still fix the floor's slope along it. Where they spread
+    less (a person staying on one spot, whose line is the noisy one between the feet),
+    `fallback`."""
     heights = points[:, feet] @ fallback
     low = points[:, feet][np.arange(len(points)), np.argmin(heights, axis=1)]
     if len(low) < 3:
         return fallback
     centred = low - low.mean(axis=0)
     _, s, vt = np.linalg.svd(centred, full_matrices=False)
-    if s[1] < 0.2 * s[0] or s[1] < 0.05:  # contacts along a line or on one spot: no plane
-        return fallback
+    if s[1] < 0.2 * s[0] or s[1] < 0.05:  # along a line or on one spot
+        if s[0] < 0.3 * np.sqrt(len(low)):  # spread under 0.3 m RMS: no line to trust
+            return fallback
+        line = vt[0]
+        n = fallback - (fallback @ line) * line
+        return n / np.linalg.norm(n)
     n = vt[2]
     return n if n @ fallback > 0 else -n
 
