@@ -361,9 +361,9 @@ def test_the_camera_azimuth_moves_the_virtual_camera():
 
 
 def test_the_camera_height_raises_the_virtual_camera_to_look_down():
-    level = mocap_clip(_walk(), MaterialConfig(max_seconds=0.4), name="walk")
+    default = mocap_clip(_walk(), MaterialConfig(max_seconds=0.4), name="walk")
     high = mocap_clip(_walk(), MaterialConfig(max_seconds=0.4, camera_height=3.0), name="walk")
-    for clip, height in ((level, 1.3), (high, 3.0)):
+    for clip, height in ((default, 1.3), (high, 3.0)):
         T = clip.truth.T_world2cam
         centre = -T[:3, :3].T @ T[:3, 3]
         assert centre[2] == pytest.approx(height)

@@ -58,7 +58,7 @@ def test_tilted_floor_is_recovered(tilt_deg, roll_deg):
 def test_level_guess_puts_the_feet_on_the_floor():
     shape = BodyShape.from_height(1.7)
     q = walking_qpos(shape, 20)
-    level = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    level = _camera_along_y(0.0)
     surface, points, _ = _posed_points(shape, q, level, -level @ np.array([0.0, -4.0, 1.2]))
     plane = level_plane(points, surface.left_foot | surface.right_foot, 0.0)
     assert np.allclose(plane[:3], UP_LEVEL)
@@ -91,18 +91,15 @@ def test_plane_tolerates_monocular_depth_errors(depth_slope):
     fitted to them by ~5 degrees here; the fitted depth gain (depth_gain_sigma) absorbs it."""
     shape = BodyShape.from_height(1.7)
     q = walking_qpos(shape, 40, heading_deg=90.0)
-    level = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-    R = Rotation.from_euler("x", -25.0, degrees=True).as_matrix() @ level
-    centre = np.array([0.5, -4.0, 2.0])
+    R, centre = _camera_along_y(25.0), np.array([0.5, -4.0, 2.0])
     surface, points, com = _posed_points(shape, q, R, -R @ centre)
     depth = np.linalg.norm(com, axis=-1)
     factor = 1.0 + (depth_slope - 1.0) * (depth - depth.mean()) / depth  # along each ray
     points, com = points * factor[:, None, None], com * factor[:, None]
-    n_true = R @ np.array([0.0, 0.0, 1.0])
 
     def angle(cfg):
         plane, _ = estimate_plane(points, surface.left_foot, surface.right_foot, com, cfg)
-        return np.degrees(np.arccos(np.clip(plane[:3] @ n_true, -1.0, 1.0))), plane[3]
+        return _floor_angle(plane, R), plane[3]
 
     rigid, _ = angle(GroundConfig(depth_gain_sigma=0.0))
     tolerant, height = angle(GroundConfig())
@@ -130,14 +127,11 @@ def test_frames_lying_on_the_floor_do_not_tilt_the_plane(lying, standing, headin
     pos, rot = segment_frames(shape.bones(), q[:, :3], q[:, 3:7], q[:, 7:])
     world = place(surface, pos, rot)
     world[..., 2] -= world[..., 2].min(axis=1, keepdims=True)   # every frame on the floor
-    level = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-    R = Rotation.from_euler("x", -25.0, degrees=True).as_matrix() @ level
-    centre = np.array([0.5, -5.0, 2.5])
+    R, centre = _camera_along_y(25.0), np.array([0.5, -5.0, 2.5])
     points = world @ R.T - R @ centre
     com = centre_of_mass(shape, surface, points)
     plane, _ = estimate_plane(points, surface.left_foot, surface.right_foot, com, GroundConfig())
-    n_true = R @ np.array([0.0, 0.0, 1.0])
-    angle = np.degrees(np.arccos(np.clip(plane[:3] @ n_true, -1.0, 1.0)))
+    angle = _floor_angle(plane, R)
     assert angle < 3.0, angle
     assert abs(plane[3] - centre[2]) < 0.15, plane[3]
 
