@@ -157,7 +157,8 @@ def _source_rate(times: np.ndarray, source: str, first_frame: int) -> float:
     if len(times) < 2 or not np.isfinite(times).all() or (dts <= 0).any():
         bad = int(np.argmax(~(np.isfinite(dts) & (dts > 0)))) + 1 if len(dts) else None
         raise PhysposeError("frame times must increase (at least two frames)", path=source,
-                            frame=None if bad is None else bad + first_frame, remedy="give each frame a positive, finite frame time")
+                            frame=None if bad is None else bad + first_frame,
+                            remedy="give each frame a positive, finite frame time")
     source_fps = float(1.0 / np.median(dts))
     lo, hi = SOURCE_FPS_RANGE
     if not lo <= source_fps <= hi:
