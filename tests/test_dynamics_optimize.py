@@ -185,6 +185,28 @@ def test_a_last_window_that_strays_is_cut_and_restarted(clip):
     assert len(res.ctrl) == len(run(clip, TINY, checkpoints=False).ctrl)
 
 
+def test_a_body_left_below_a_rising_estimate_is_cut_where_its_head_falls_behind(clip):
+    # The estimate rises 0.25 m off the floor (a get-up no standing body can follow); the
+    # COM rule is put out of reach, so only the head's drop below the estimate's can cut.
+    body, fit, obs = clip
+    risen = fit.qpos.copy()
+    risen[12:, 2] += 0.25
+    risen_fit = dataclasses.replace(fit, qpos=risen)
+    cfg = dataclasses.replace(TINY, retries=0, reset_distance=1.0, fall_distance=0.15)
+    res = optimize_dynamics(body, risen_fit, obs, cfg, checkpoints=False, progress=False)
+    cuts = [w["cut_at"] for w in res.windows if w["cut_at"] is not None]
+    assert cuts and cuts[0] >= 12 and res.restarts[0] == cuts[0]
+    assert abs(res.qpos[cuts[0], 2] - risen[cuts[0], 2]) < 0.05  # restarted on the estimate
+    assert res.config["fall_distance"] == 0.15
+    # Off (infinite, the default config), the COM alone decides: no cut, and the config, so
+    # the checkpoint key, is what it was before the rule.
+    off = optimize_dynamics(body, risen_fit, obs, dataclasses.replace(cfg, fall_distance=np.inf),
+                            checkpoints=False, progress=False)
+    assert not off.restarts and "fall_distance" not in off.config
+    with pytest.raises(PhysposeError, match="fall_distance"):
+        dataclasses.replace(cfg, fall_distance=0.0)
+
+
 def test_stretches_between_restarts_are_placed_on_the_estimate(clip, tmp_path):
     body, fit, obs = clip
     jumped = fit.qpos.copy()

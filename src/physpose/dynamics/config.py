@@ -73,6 +73,10 @@ class DynamicsConfig:
     state (a discontinuity instead of a fall that would carry on; recorded as reset_after); a
     window whose COM strays this far at an earlier kept frame is cut there and a window from
     that frame restarts (recorded as cut_at).
+    fall_distance: m; a window is also cut where the simulated head is more than this below
+    the estimate's: a fall under way, which a body going down beside an estimate near the floor
+    (a roll, a get-up) shows in its head before its COM strays reset_distance. Infinite: the
+    COM alone decides, as before stop 79.
     refine_within: m; with the refinement on, an attempt whose search hands on a COM further
     than this from the estimate's is refined only if it is kept: the refinement moves the
     handover by 8 mm (median), and none of 82 attempts searched beyond 0.3 m came within the
@@ -141,6 +145,7 @@ class DynamicsConfig:
     # punch 627 -> 194, roll 438 -> 381, jump 402 -> 360, 131_03 235 -> 156 mm, no clip worse;
     # 0.10 was no better (docs/dynamics.md).
     reset_distance: float = 0.15
+    fall_distance: float = math.inf
     refine_within: float = 0.3
     retry_within: float = math.inf
     search: str = "legs_trunk"
@@ -200,6 +205,9 @@ class DynamicsConfig:
                                 f"{self.retry_distance} and reset_distance={self.reset_distance}"
                                 " > 0", remedy="use e.g. retries=2, retry_distance=0.15, "
                                 "reset_distance=0.15")
+        if not self.fall_distance > 0:
+            raise PhysposeError(f"dynamics fall_distance={self.fall_distance} must be > 0",
+                                remedy="use e.g. 0.15 (m), or inf to cut on the COM alone")
         if self.camera not in CAMERA_SETTINGS:
             raise PhysposeError(f"dynamics camera {self.camera!r} is unknown",
                                 remedy=f"use one of {CAMERA_SETTINGS}")
@@ -227,6 +235,8 @@ class DynamicsConfig:
             out.pop("retry_within")  # likewise retried whatever the miss (stop 42)
         if not self.refine.enabled or self.refine_within == math.inf:
             out.pop("refine_within")  # likewise every attempt refined (stop 41)
+        if self.fall_distance == math.inf:
+            out.pop("fall_distance")  # likewise cut on the COM alone (stop 79)
         if self.start_sight_smoothing == 0:
             out.pop("start_sight_smoothing")  # likewise start velocities unsmoothed (stop 48)
         if not self.refine.enabled:

@@ -53,6 +53,8 @@ from physpose.dynamics.ilqr import ImageTerm, camera_centres, refine_targets
 from physpose.dynamics.windows import (Window, WindowProblem, blend_weights, plan_windows,
                                        score, step_position, window_over)
 from physpose.errors import PhysposeError, expect_type
+from physpose.fk import site_positions
+from physpose.joints import JOINT_NAMES
 from physpose.reconstruction import restart_frames
 from physpose.kinematics.result import KinematicFit
 from physpose.observations import Observations
@@ -73,6 +75,7 @@ class _Setup:
     step_times: np.ndarray    # (N,) s, time of each control step
     frame_steps: np.ndarray   # (T,) the simulation step nearest each frame
     root_residual: np.ndarray  # (N+1,) body weights, the estimate's unexplained root force
+    head_height: np.ndarray   # (T,) m, the head joint's height in the estimate the windows follow
     start_qvel: np.ndarray    # (N+1, 54) velocities a window started from the estimate takes
 
 
@@ -148,9 +151,11 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
     objective = make_reference(sim.model, grounded, obs.keypoints2d, kin.camera_K,
                                kin.T_world2cam, fps, smooth_qpos=reference.qpos[frame_steps],
                                camera_travel=travel, swing_confidence=cfg.swing_confidence)
+    head = mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_SITE, "head")
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
                   objective=objective, step_times=step_times, frame_steps=frame_steps,
                   root_residual=needs.root_residual,
+                  head_height=site_positions(sim.model, [head], objective.qpos)[:, 0, 2],
                   start_qvel=_start_velocities(kin, reference, travel, cfg.start_sight_smoothing))
 
 
@@ -373,14 +378,18 @@ def _refine_logged(setup: _Setup, searched: WindowProblem, best: Best, initial: 
     return best, initial, error
 
 
-def _stray_frame(setup: _Setup, win: Window, com: np.ndarray, cfg: DynamicsConfig
-                 ) -> int | None:
-    """First frame a window keeps (com: (F, 3), its kept frames from win.first) whose
-    simulated COM is more than ``reset_distance`` from the estimate's, or None. A cut keeps at
+def _stray_frame(setup: _Setup, win: Window, arrays: dict, cfg: DynamicsConfig) -> int | None:
+    """First frame a window keeps (``arrays``: its kept frames from win.first) at which the
+    simulated body has strayed, or None: its COM more than ``reset_distance`` from the
+    estimate's, or its head more than ``fall_distance`` below the estimate's. A cut keeps at
     least MIN_KEPT_SECONDS of the window and leaves at least two frames for the restart."""
     keep = max(1, int(round(MIN_KEPT_SECONDS * setup.objective.fps)))
-    error = np.linalg.norm(com - setup.objective.com[win.first:win.first + len(com)], axis=-1)
-    far = np.flatnonzero(error[keep:] > cfg.reset_distance)
+    kept = slice(win.first, win.first + len(arrays["com"]))
+    strayed = np.linalg.norm(arrays["com"] - setup.objective.com[kept], axis=-1) \
+        > cfg.reset_distance
+    drop = setup.head_height[kept] - arrays["joints"][:, JOINT_NAMES.index("head"), 2]
+    strayed |= drop > cfg.fall_distance
+    far = np.flatnonzero(strayed[keep:])
     if not len(far):
         return None
     cut = win.first + keep + int(far[0])
@@ -432,9 +441,10 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
         coefs, state = arrays["coefs"], arrays["next_state"]
         # A window that could not keep the body near the estimate hands on a restart from the
         # kinematic state instead of a fall in progress (a jump in the output, recorded):
-        # from the first kept frame whose COM strayed further than reset_distance, or else
-        # from the next window's start when the handover state has strayed that far.
-        cut = _stray_frame(setup, win, arrays["com"], cfg)
+        # from the first kept frame whose COM strayed further than reset_distance (or whose
+        # head fell further than fall_distance below the estimate's), or else from the next
+        # window's start when the handover state's COM has strayed that far.
+        cut = _stray_frame(setup, win, arrays, cfg)
         if cut is not None:
             following = wins[w + 1] if w + 1 < len(wins) else win
             restart = window_over(w + 1, cut, following.last, setup.objective.fps, setup.sim.dt)
