@@ -31,6 +31,10 @@ def test_presets_and_ablations():
     assert PRESETS["fast"].refine.enabled and not PRESETS["paper"].refine.enabled
     # Since stop 40 the fast preset's refinement also pulls the landmarks onto the detections.
     assert PRESETS["fast"].refine.image > 0
+    # Since stop 79 the fast preset also cuts where the simulated head falls below the
+    # estimate's, as far as the COM may stray; the paper preset cuts on the COM alone.
+    assert PRESETS["fast"].fall_distance == PRESETS["fast"].reset_distance
+    assert PRESETS["paper"].fall_distance == math.inf
     assert SEARCH_ONLY == dataclasses.replace(PRESETS["fast"], refine=SEARCH_ONLY.refine,
                                               retries=2)
     assert not SEARCH_ONLY.refine.enabled
