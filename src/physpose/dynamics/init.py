@@ -64,14 +64,33 @@ def align_quaternion_signs(quat: np.ndarray) -> np.ndarray:
     return q
 
 
+def _reflected(values: np.ndarray) -> np.ndarray:
+    """values[1:] (qpos rows) reflected through values[0], in reverse order: the motion
+    before values[0] that mirrors the motion after it (rotations mirrored on the sphere)."""
+    end, after = values[0], values[:0:-1]
+    out = 2.0 * end - after
+    out[:, 3:7] = quat.multiply(quat.multiply(end[3:7], quat.conjugate(after[:, 3:7])), end[3:7])
+    return out
+
+
 def smooth_reference(qpos: np.ndarray, fps: float, dt: float, num_steps: int,
                      knot_spacing: float) -> Reference:
     """Low-pass the estimate qpos (T, 55) at ``fps`` and sample it at steps 0..num_steps."""
-    t_frames = np.arange(len(qpos)) / fps
-    t_steps = np.arange(num_steps + 1) * dt
-    grid = KnotGrid(knot_spacing, max(t_frames[-1], t_steps[-1]))
     values = np.array(qpos, dtype=float)
     values[:, 3:7] = align_quaternion_signs(values[:, 3:7])
+    # The estimate continued past both ends by its point reflection (x(-i) = 2 x(0) - x(i),
+    # for the root's rotation q(-i) = q(0) q(i)* q(0); over two knot spacings), so that the
+    # fit's speeds at the clip's first and last frames follow the motion's trend there instead
+    # of the few noisy frames a spline's end rests on: the first window starts from them.
+    pad = min(len(values) - 1, int(np.ceil(2 * knot_spacing * fps)))
+    if pad:
+        values = np.concatenate([_reflected(values[:pad + 1]), values,
+                                 _reflected(values[:-pad - 2:-1])[::-1]])
+        values[:, 3:7] = align_quaternion_signs(values[:, 3:7])
+    shift = pad / fps  # clip time 0 on the padded grid
+    t_frames = np.arange(len(values)) / fps
+    t_steps = np.arange(num_steps + 1) * dt + shift
+    grid = KnotGrid(knot_spacing, max(t_frames[-1], t_steps[-1]))
     basis = grid.basis(t_frames)
     # Coefficients no frame constrains (a clip shorter than a few knots) rest on the nearest
     # frame's value rather than zero.
