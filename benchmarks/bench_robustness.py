@@ -1,15 +1,16 @@
 """Robustness sweep: the whole pipeline on altered copies of the shared real videos.
 
 Each source segment is re-encoded as it is ("original") and altered in the ways users' footage
-differs: mirrored, cropped to portrait, low resolution, half the frame rate, dark and
-noisy, the person hidden for 10 frames, one second only, every frame shown twice at 60 fps.
-Every copy runs through `pipeline.reconstruct` with the default preset. The sweep records
-whether it finished (an exception is recorded and the sweep goes on), the physics' restarts,
-its time, and the image error and foot skate of both motions. Image errors are also given as a
-percentage of the person's height in the image, so that resolutions compare.
+differs: mirrored, cropped to portrait, low resolution, half the frame rate (from a still
+camera and from a travelling one), dark and noisy, the person hidden for 10 frames, one second
+only, every frame shown twice at 60 fps. Every copy runs through `pipeline.reconstruct` with
+the default preset. The sweep records whether it finished (an exception is recorded and the
+sweep goes on), the physics' restarts, the frames of windows in which no simulated sample
+stayed valid, its time, and the image error and foot skate of both motions. Image errors are
+also given as a percentage of the person's height in the image, so that resolutions compare.
 
-Needs ../shared/data/video (each source skipped with a message when absent). All 11 copies
-took 13 min on a 2-core machine. Usage:
+Needs ../shared/data/video (each source skipped with a message when absent). The 12 copies
+took 12 min of reconstruction on a 2-core machine (stop 81). Usage:
 
     uv run python benchmarks/bench_robustness.py --out out/robustness [--only taichi_mirror]
 
@@ -30,6 +31,7 @@ import cv2
 import numpy as np
 
 from physpose.benchmark.report import results_json
+from physpose.diagnostics import invalid_window_runs
 from physpose.metrics import fallen
 from physpose.outputs import motion_metrics
 from physpose.paths import shared_data_dir
@@ -72,6 +74,7 @@ VARIANTS: dict[str, tuple[str, Callable[[Frames, float], tuple[Frames, float]]]]
     "taichi_portrait": ("taichi", lambda f, fps: (_portrait(f), fps)),
     "taichi_hidden_10_frames": ("taichi", lambda f, fps: (_hide_person(f), fps)),
     "taichi_one_second": ("taichi", lambda f, fps: (f[:round(fps)], fps)),
+    "taichi_half_rate": ("taichi", lambda f, fps: (f[::2], fps / 2)),
     "road_original": ("road", lambda f, fps: (f, fps)),
     "road_320x180": ("road", lambda f, fps: (
         [cv2.resize(x, (320, 180), interpolation=cv2.INTER_AREA) for x in f], fps)),
@@ -127,7 +130,8 @@ def run_variant(name: str, video: Path, folder: Path) -> dict:
 def _reconstruct_and_score(video: Path, folder: Path) -> dict:
     row: dict = {}
     start = time.perf_counter()
-    rec = reconstruct(video, folder, PipelineConfig(), resume=False, progress=False)
+    config = PipelineConfig()
+    rec = reconstruct(video, folder, config, resume=False, progress=False)
     row["time_s"] = time.perf_counter() - start
     row.update(frames=rec.num_frames, fps=rec.fps, restarts=len(rec.restarts),
                dynamics_s_per_s=rec.meta["timings_s"]["dynamics"] * rec.fps / rec.num_frames)
@@ -140,6 +144,9 @@ def _reconstruct_and_score(video: Path, folder: Path) -> dict:
                        "foot_skate_pct": m["foot_skate_pct"]}
     row["physics"]["fallen_pct"] = fallen(rec.joints("physics"), rec.joints_kinematic,
                                           rec.joint_names)
+    runs = invalid_window_runs(rec.meta["dynamics"]["windows"],
+                               sequential=not config.dynamics.independent)
+    row["physics"]["invalid_frames"] = sum(last - first + 1 for first, last in runs)
     return row
 
 
@@ -150,7 +157,7 @@ def _cell(value, spec: str) -> str:
 def print_table(rows: list[dict]) -> None:
     print(f"{'variant':24s} {'frames':>6s} {'restarts':>8s} {'dyn s/s':>7s} "
           f"{'2d % height kin/phys':>21s} {'2d px kin/phys':>15s} {'skate % kin/phys':>17s} "
-          f"{'fallen %':>8s}")
+          f"{'fallen %':>8s} {'invalid frames':>14s}")
     for r in rows:
         if "error" in r:
             print(f"{r['variant']:24s} FAILED {r['error']}")
@@ -162,7 +169,7 @@ def print_table(rows: list[dict]) -> None:
               f"{_cell(p['mpjpe_2d_pct_height'], '{:.2f}'):<8s}"
               f"{_cell(k['mpjpe_2d_px'], '{:.1f}'):>7s} / {_cell(p['mpjpe_2d_px'], '{:.1f}'):<5s}"
               f"{k['foot_skate_pct']:8.1f} / {p['foot_skate_pct']:<6.1f}"
-              f"{p['fallen_pct']:8.1f}")
+              f"{p['fallen_pct']:8.1f} {p['invalid_frames']:14d}")
 
 
 def main() -> None:
