@@ -11,6 +11,7 @@ import pytest
 from physpose.body import build_body
 from physpose.dynamics import TERMS, DynamicsConfig, optimize_dynamics
 from physpose.dynamics import checkpoint
+from physpose.dynamics import optimize as optimize_module
 from physpose.dynamics.balance import BalanceGains
 from physpose.dynamics.ilqr import RefineConfig
 from physpose.dynamics.optimize import foot_heights, reference_motion, searched_dofs
@@ -205,6 +206,40 @@ def test_a_body_left_below_a_rising_estimate_is_cut_where_its_head_falls_behind(
     assert not off.restarts and "fall_distance" not in off.config
     with pytest.raises(PhysposeError, match="fall_distance"):
         dataclasses.replace(cfg, fall_distance=0.0)
+
+
+def test_a_continued_window_with_no_valid_sample_restarts_from_the_estimate(
+        clip, tmp_path, monkeypatch):
+    # The search of the second window, continued from the first one's simulated state, is
+    # made to find no valid sample (a state handed over that was already heading for a
+    # fall); the window must then be searched again from the kinematic state at its own
+    # first frame, a recorded restart, rather than keep the least bad fall.
+    search = optimize_module._search_with_retries
+    calls = []
+
+    def failing_when_continued(problem, simulator, setup, cfg, timing, w, *args):
+        searched, best, initial, evaluations = search(problem, simulator, setup, cfg, timing,
+                                                      w, *args)
+        calls.append((w, problem.history is not None))
+        if w == 1 and problem.history is not None:
+            best = dataclasses.replace(best, valid=False, loss=np.inf)
+        return searched, best, initial, evaluations
+
+    monkeypatch.setattr(optimize_module, "_search_with_retries", failing_when_continued)
+    res = run(clip, TINY, checkpoint_dir=tmp_path)
+    assert calls[:3] == [(0, False), (1, True), (1, False)]
+    first = res.windows[1]["frames"][0]
+    assert res.windows[1]["restarted"] and res.windows[1]["valid"]
+    assert res.windows[0]["reset_after"] and res.restarts[0] == first
+    body, fit, _ = clip
+    reference = reference_motion(body, fit, clip[2], TINY)
+    assert np.linalg.norm(res.qpos[first, :3] - reference[first, :3]) < 0.02
+    # Resumed from its checkpoints the run is the same, the restart read from the record.
+    monkeypatch.setattr(optimize_module, "_search_with_retries", search)
+    resumed = run(clip, TINY, checkpoint_dir=tmp_path)
+    assert all(r.get("resumed") for r in resumed.windows)
+    assert resumed.restarts == res.restarts
+    np.testing.assert_array_equal(resumed.qpos, res.qpos)
 
 
 def test_stretches_between_restarts_are_placed_on_the_estimate(clip, tmp_path):

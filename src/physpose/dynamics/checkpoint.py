@@ -18,7 +18,7 @@ from physpose.paths import cache_dir
 
 _log = logging.getLogger(__name__)
 
-CHECKPOINT_VERSION = 7  # bump when the optimisation's results change for the same inputs
+CHECKPOINT_VERSION = 8  # bump when the optimisation's results change for the same inputs
 
 
 def run_key(config_identity: dict, inputs: dict) -> str:

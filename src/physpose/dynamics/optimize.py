@@ -7,7 +7,8 @@ of the previous one at its first frame and searches the spline coefficients whos
 begins inside it; coefficients already acting before its start stay as the previous window left
 them, so the whole clip is one simulation driven by one spline, except where the simulated
 COM strays more than ``reset_distance`` from the estimate: the window is cut there and the run
-restarts from the kinematic state (a recorded jump). Independent windows (the
+restarts from the kinematic state (a recorded jump), as it does at a window whose search from
+the simulated state finds no valid sample. Independent windows (the
 paper's mode for long clips): every window starts from the kinematic state at its first frame,
 searches all its coefficients, and the windows are searched side by side (their samples share
 one batched rollout) and cross-faded where they overlap.
@@ -378,6 +379,15 @@ def _refine_logged(setup: _Setup, searched: WindowProblem, best: Best, initial: 
     return best, initial, error
 
 
+def _restart_point(setup: _Setup, win: Window, coefs: np.ndarray, cfg: DynamicsConfig
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The state and coefficients a window restarted from the kinematic state begins with:
+    the estimate's state at its first step, and the initial coefficients from there on."""
+    state = _kinematic_state(setup, win.start_step, cfg.ground_snap)
+    active = setup.grid.active(win.start_step * setup.sim.dt, setup.grid.duration).start
+    return state, np.where(np.arange(len(coefs))[:, None] >= active, setup.coefs0, coefs)
+
+
 def _stray_frame(setup: _Setup, win: Window, arrays: dict, cfg: DynamicsConfig) -> int | None:
     """First frame a window keeps (``arrays``: its kept frames from win.first) at which the
     simulated body has strayed, or None: its COM more than ``reset_distance`` from the
@@ -417,15 +427,28 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
         win = wins[w]
         commit_end = wins[w + 1].first if w + 1 < len(wins) else win.last + 1
         step_end = wins[w + 1].start_step if w + 1 < len(wins) else win.end_step
+        continued = bool(w) and not reset
         saved = checkpoint.load_window(folder, w) if folder is not None else None
         if saved is None:
             start = time.perf_counter()
             joints_so_far = np.concatenate(parts["joints"]) if parts["joints"] else np.zeros((0,))
-            history = joints_so_far[max(0, win.first - 2):win.first] if w and not reset else None
-            problem = _problem(setup, win, coefs, state, bool(w) and not reset, history, cfg)
+            history = joints_so_far[max(0, win.first - 2):win.first] if continued else None
+            label = f"dynamics window {w + 1}/{len(wins)}"
+            problem = _problem(setup, win, coefs, state, continued, history, cfg)
             problem, best, initial, evaluations = _search_with_retries(
-                problem, simulator, setup, cfg, timing, w, step_end,
-                f"dynamics window {w + 1}/{len(wins)}", progress)
+                problem, simulator, setup, cfg, timing, w, step_end, label, progress)
+            restarted = continued and not best.valid
+            if restarted:
+                # No sample from the state handed over stayed valid: that state was already
+                # heading for a fall. The window restarts from the kinematic state at its own
+                # first frame instead (a recorded jump, as after a strayed handover), rather
+                # than keep the least bad fall.
+                state, coefs = _restart_point(setup, win, coefs, cfg)
+                problem = _problem(setup, win, coefs, state, False, None, cfg)
+                problem, best, initial, more = _search_with_retries(
+                    problem, simulator, setup, cfg, timing, w, step_end,
+                    label + " from the estimate", progress)
+                evaluations += more
             coefs = coefs.copy()
             coefs[problem.free] = problem.coefficients(best.x[None])[0]
             steps = _step_outputs(setup, best, step_end - win.start_step, timing)
@@ -433,11 +456,15 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             next_state = best.states[step_end - win.start_step]
             record = _record(win, best, initial, evaluations, time.perf_counter() - start,
                              cfg.weights)
+            if restarted:
+                record["restarted"] = True
             arrays = {"coefs": coefs, "next_state": next_state, **steps, **out}
             if folder is not None:
                 checkpoint.save_window(folder, w, arrays, record)
         else:  # optimised by an earlier run: its seconds are not this run's
             arrays, record = _with_forces(saved[0]), dict(saved[1], resumed=True)
+        if record.get("restarted"):
+            records[-1] = dict(records[-1], reset_after=True)
         coefs, state = arrays["coefs"], arrays["next_state"]
         # A window that could not keep the body near the estimate hands on a restart from the
         # kinematic state instead of a fall in progress (a jump in the output, recorded):
@@ -454,10 +481,7 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             record.get("handover_error") is not None
             and record["handover_error"] > cfg.reset_distance))
         if reset:
-            state = _kinematic_state(setup, wins[w + 1].start_step, cfg.ground_snap)
-            coefs = np.where(np.arange(len(coefs))[:, None] >= setup.grid.active(
-                wins[w + 1].start_step * setup.sim.dt, setup.grid.duration).start, setup.coefs0,
-                coefs)
+            state, coefs = _restart_point(setup, wins[w + 1], coefs, cfg)
         record = dict(record, reset_after=bool(reset), cut_at=cut)
         for k in _OUTPUT_KEYS:
             parts[k].append(arrays[k])
