@@ -233,6 +233,7 @@ def test_a_continued_window_with_no_valid_sample_restarts_from_the_estimate(
     assert res.windows[0]["reset_after"] and res.restarts[0] == first
     body, fit, _ = clip
     reference = reference_motion(body, fit, clip[2], TINY)
+    np.testing.assert_allclose(res.qpos[first, 7:], reference[first, 7:], atol=1e-9)  # its pose
     assert np.linalg.norm(res.qpos[first, :3] - reference[first, :3]) < 0.02
     # Resumed from its checkpoints the run is the same, the restart read from the record.
     monkeypatch.setattr(optimize_module, "_search_with_retries", search)
