@@ -31,7 +31,6 @@ import cv2
 import numpy as np
 
 from physpose.benchmark.report import results_json
-from physpose.diagnostics import invalid_window_runs
 from physpose.metrics import fallen
 from physpose.outputs import motion_metrics
 from physpose.paths import shared_data_dir
@@ -130,8 +129,7 @@ def run_variant(name: str, video: Path, folder: Path) -> dict:
 def _reconstruct_and_score(video: Path, folder: Path) -> dict:
     row: dict = {}
     start = time.perf_counter()
-    config = PipelineConfig()
-    rec = reconstruct(video, folder, config, resume=False, progress=False)
+    rec = reconstruct(video, folder, PipelineConfig(), resume=False, progress=False)
     row["time_s"] = time.perf_counter() - start
     row.update(frames=rec.num_frames, fps=rec.fps, restarts=len(rec.restarts),
                dynamics_s_per_s=rec.meta["timings_s"]["dynamics"] * rec.fps / rec.num_frames)
@@ -144,9 +142,9 @@ def _reconstruct_and_score(video: Path, folder: Path) -> dict:
                        "foot_skate_pct": m["foot_skate_pct"]}
     row["physics"]["fallen_pct"] = fallen(rec.joints("physics"), rec.joints_kinematic,
                                           rec.joint_names)
-    runs = invalid_window_runs(rec.meta["dynamics"]["windows"],
-                               sequential=not config.dynamics.independent)
-    row["physics"]["invalid_frames"] = sum(last - first + 1 for first, last in runs)
+    # The pipeline's own screen of windows without a valid sample (pipeline._screen_physics).
+    row["physics"]["invalid_frames"] = sum(
+        last - first + 1 for first, last in rec.meta["diagnostics"]["invalid_windows"])
     return row
 
 
