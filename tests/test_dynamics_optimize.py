@@ -231,8 +231,8 @@ def test_a_continued_window_with_no_valid_sample_restarts_from_the_estimate(
     first = res.windows[1]["frames"][0]
     assert res.windows[1]["restarted"] and res.windows[1]["valid"]
     assert res.windows[0]["reset_after"] and res.restarts[0] == first
-    body, fit, _ = clip
-    reference = reference_motion(body, fit, clip[2], TINY)
+    body, fit, obs = clip
+    reference = reference_motion(body, fit, obs, TINY)
     np.testing.assert_allclose(res.qpos[first, 7:], reference[first, 7:], atol=1e-9)  # its pose
     assert np.linalg.norm(res.qpos[first, :3] - reference[first, :3]) < 0.02
     # Resumed from its checkpoints the run is the same, the restart read from the record.
