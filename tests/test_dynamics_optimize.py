@@ -231,6 +231,10 @@ def test_a_continued_window_with_no_valid_sample_restarts_from_the_estimate(
     first = res.windows[1]["frames"][0]
     assert res.windows[1]["restarted"] and res.windows[1]["valid"]
     assert res.windows[0]["reset_after"] and res.restarts[0] == first
+    # The record keeps what the search from the state handed over tried, beside its own.
+    continued = res.windows[1]["continued"]
+    assert len(continued["attempt_log"]) >= 1 and "searched" in continued["attempt_log"][0]
+    assert 0 < continued["evaluations"] < res.windows[1]["evaluations"]
     body, fit, obs = clip
     reference = reference_motion(body, fit, obs, TINY)
     np.testing.assert_allclose(res.qpos[first, 7:], reference[first, 7:], atol=1e-9)  # its pose

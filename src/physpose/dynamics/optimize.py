@@ -443,6 +443,9 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
                 # heading for a fall. The window restarts from the kinematic state at its own
                 # first frame instead (a recorded jump, as after a strayed handover), rather
                 # than keep the least bad fall.
+                continued_log = {"attempt_log": initial["attempt_log"],
+                                 "evaluations": evaluations,
+                                 "loss_initial": _finite_or_none(initial["loss"])}
                 state, coefs = _restart_point(setup, win, coefs, cfg)
                 problem = _problem(setup, win, coefs, state, False, None, cfg)
                 problem, best, initial, more = _search_with_retries(
@@ -456,8 +459,8 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             next_state = best.states[step_end - win.start_step]
             record = _record(win, best, initial, evaluations, time.perf_counter() - start,
                              cfg.weights)
-            if restarted:
-                record["restarted"] = True
+            if restarted:  # what the search from the state handed over found, kept
+                record.update(restarted=True, continued=continued_log)
             arrays = {"coefs": coefs, "next_state": next_state, **steps, **out}
             if folder is not None:
                 checkpoint.save_window(folder, w, arrays, record)
