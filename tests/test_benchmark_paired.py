@@ -7,6 +7,7 @@ import math
 
 import pytest
 
+from physpose.benchmark.material import MaterialConfig
 from physpose.benchmark.paired import merge_results, paired_differences, run_labels
 from physpose.benchmark.report import render_markdown, write_results
 from physpose.benchmark.runner import BenchmarkConfig, results_document
@@ -163,6 +164,32 @@ def test_the_same_variant_in_two_runs_is_compared_by_run(tmp_path, capsys):
                        tmp_path / "c" / "a"]) == ["a#1", "b", "x", "a#2"]
     merged = merge_results([{"results": rows}], ["r"])
     assert {r["variant"] for r in merged} == {TRUTH_ROW, "base@r", "new@r"}
+
+
+def test_pooled_runs_pair_within_each_run_and_count_every_runs_clips(tmp_path, capsys):
+    # Two seeds of the same three clips: the base's figures differ between the runs, so
+    # pairing across runs would be wrong; pooled, the six differences count apart.
+    rows = _results()
+    shifted = [dict(r, metrics={k: v + 50.0 if k == "mpjpe_g_mm" else v
+                                for k, v in r["metrics"].items()}) for r in rows]
+    for r in shifted:
+        if r["variant"] == "new":
+            r["metrics"]["mpjpe_g_mm"] += 3.0  # differences 4, 5 and 9 under the second seed
+    first = _run(tmp_path, "s0", ("base", "new"), rows)
+    doc = results_document(shifted, [], BenchmarkConfig(variants=("base", "new"),
+                                                        material=MaterialConfig(seed=1)))
+    second = write_results(doc, tmp_path / "s1")[0]
+    assert main(["compare", str(first), str(second), "--base", "base", "--pool"]) == 0
+    out, err = capsys.readouterr()
+    diffs = [1.0, 2.0, 6.0, 4.0, 5.0, 9.0]
+    mean = sum(diffs) / 6
+    se = math.sqrt(sum((d - mean) ** 2 for d in diffs) / 5) / math.sqrt(6)
+    assert f"| new | 6 | 145 -> 150 (+{mean:.1f} +- {se:.1f}) |" in out
+    assert "prepared their material differently" not in err
+    merged = merge_results([{"results": rows}], clip_labels=["s0"])
+    assert {r["clip"] for r in merged} == {"a@s0", "b@s0", "c@s0"}
+    with pytest.raises(SystemExit):  # the two ways of telling runs apart exclude each other
+        main(["compare", str(first), str(second), "--base", "base", "--pool", "--by-run"])
 
 
 def test_compare_notes_a_run_written_before_it_finished(tmp_path, capsys):

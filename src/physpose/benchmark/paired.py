@@ -112,16 +112,21 @@ def _is_record(record) -> bool:
         and isinstance(record.get("metrics", {}), dict)
 
 
-def merge_results(docs: list[dict], labels: list[str] | None = None) -> list[dict]:
+def merge_results(docs: list[dict], labels: list[str] | None = None,
+                  clip_labels: list[str] | None = None) -> list[dict]:
     """The per-clip records of several results documents; where two have the same variant on
     the same clip, the later document's record is kept. labels (one per document): name every
     variant of a document ``variant@label`` instead (the truth's own row keeps its name), so
-    the same variant in two runs (two seeds, two versions) can be compared."""
+    the same variant in two runs (two seeds, two versions) can be compared. clip_labels (one
+    per document): name every clip ``clip@label`` instead, so each run's clips count apart
+    and the variants' differences pool over the runs (the same clips under several seeds)."""
     merged: dict[tuple[str, str, str], dict] = {}
     for k, doc in enumerate(docs):
         for r in doc["results"]:
             if labels is not None and r["variant"] != TRUTH_ROW:
                 r = dict(r, variant=f"{r['variant']}@{labels[k]}")
+            if clip_labels is not None:
+                r = dict(r, clip=f"{r['clip']}@{clip_labels[k]}")
             merged[(r["kind"], r["clip"], r["variant"])] = r
     return list(merged.values())
 

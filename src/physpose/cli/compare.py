@@ -24,16 +24,21 @@ def register(sub: argparse._SubParsersAction) -> None:
                     "print, per kind of material, each variant's per-clip differences from the "
                     "base variant: their mean and standard error. Where two files have the "
                     "same variant on the same clip, the later file's record is used, unless "
-                    "--by-run names each run's variants apart.")
+                    "--by-run names each run's variants apart or --pool each run's clips.")
     p.add_argument("results", nargs="+", type=Path, metavar="RESULTS",
                    help="results.json of a benchmark run, or its --out folder")
     p.add_argument("--base", required=True, metavar="NAME",
                    help="the variant the others are compared with, e.g. dynamics")
     p.add_argument("--variant", action="append", default=[], metavar="NAME",
                    help="compare only these variants (repeatable; default: all but the base)")
-    p.add_argument("--by-run", action="store_true",
-                   help="name every variant NAME@RUN (RUN: the results folder's name) so the "
-                        "same variant in two runs is compared, e.g. --base dynamics@old")
+    apart = p.add_mutually_exclusive_group()
+    apart.add_argument("--by-run", action="store_true",
+                       help="name every variant NAME@RUN (RUN: the results folder's name) so "
+                            "the same variant in two runs is compared, e.g. --base dynamics@old")
+    apart.add_argument("--pool", action="store_true",
+                       help="name every clip CLIP@RUN so each run's clips count apart: the "
+                            "variants are paired within each run and their differences pooled "
+                            "over the runs (the same clips under several seeds)")
     p.add_argument("--out", type=Path, metavar="FILE",
                    help="also write the comparison: FILE.md (markdown) or FILE.json")
     p.set_defaults(func=run)
@@ -41,7 +46,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     docs = [load_results(path) for path in args.results]
-    results = merge_results(docs, run_labels(args.results) if args.by_run else None)
+    labels = run_labels(args.results)
+    results = merge_results(docs, labels if args.by_run else None,
+                            labels if args.pool else None)
     present = list(dict.fromkeys(r["variant"] for r in results if r["variant"] != TRUTH_ROW))
     missing = [v for v in [args.base, *args.variant] if v not in present]
     if missing:
@@ -57,7 +64,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out is not None:
         check_output_file(args.out)
     configs = {json.dumps(doc.get("config", {}).get("material"), sort_keys=True) for doc in docs}
-    if len(configs) > 1:
+    if len(configs) > 1 and not args.pool:  # pooled runs differ in their seeds by design
         print("physpose compare: note: the runs prepared their material differently (seed, "
               "length, camera...); their clips are compared as they are", file=sys.stderr)
     for path, doc in zip(args.results, docs):
