@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from dataclasses import replace
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -12,7 +13,8 @@ import pytest
 from physpose.benchmark import VARIANTS, get_variant, register_variant, write_results
 from physpose.benchmark.baseline import level_ground_frame, solve_root_translation
 from physpose.benchmark.material import (Clip, Material, MaterialConfig, _observe_config,
-                                         crop_mocap, load_clips, mocap_clip, uniform_fps)
+                                         _reference_without, crop_mocap, load_clips, mocap_clip,
+                                         uniform_fps)
 from physpose.benchmark.oracle import FOOT_LANDMARKS, SOLE_JOINTS, STANCE_HEIGHT, truth_on_body
 from physpose.benchmark.report import aggregate, render_markdown
 from physpose.benchmark.runner import (BenchmarkConfig, results_document, run_benchmark, run_clips,
@@ -23,8 +25,10 @@ from physpose.errors import PhysposeError
 from physpose.joints import JOINT_INDEX, JOINT_NAMES, LANDMARK_INDEX, joints_from_landmarks
 from physpose.metrics import project, transform_points
 from physpose.mocap import MocapClip
+from physpose.multiview.reference import ReferenceConfig, triangulate_observations
 from physpose.reconstruction import Reconstruction
 from synthetic_video import make_video
+from test_triangulate import _project, _rig
 
 FPS = 25.0
 
@@ -504,3 +508,41 @@ def test_a_run_stopped_midway_keeps_the_material_it_finished(clip, tmp_path, mon
     assert kept["pending"] == ["second.bvh", "third.bvh"]
     assert "**Incomplete**" in (out / "results.md").read_text()
     assert sorted(p.name for p in out.iterdir()) == ["results.json", "results.md"]
+
+
+def _multiview_scene(shift_px: float):
+    """Four synthetic cameras round a person whose 33 landmarks every view sees exactly, but
+    view 2, whose detections are all `shift_px` to the right; the true landmarks."""
+    rng = np.random.default_rng(3)
+    truth = rng.uniform([-0.4, -0.4, 0.0], [0.4, 0.4, 1.8], size=(6, 33, 3))
+    P = _rig()
+    uv = _project(P, truth)
+    uv[2, ..., 0] += shift_px
+    cameras = tuple(SimpleNamespace(name=f"cam{i}", projection=P[i], undistort=lambda px: px)
+                    for i in range(4))
+    views = tuple(SimpleNamespace(keypoints2d=np.concatenate([uv[i], np.ones((6, 33, 1))], -1),
+                                  valid=np.ones(6, bool)) for i in range(4))
+    return SimpleNamespace(cameras=cameras, views=views), truth
+
+
+def test_a_view_can_be_scored_against_the_reference_its_own_detections_did_not_build():
+    ref, truth = _multiview_scene(shift_px=15.0)
+    cfg = ReferenceConfig()
+    every = joints_from_landmarks(triangulate_observations(ref.cameras, ref.views,
+                                                           cfg.triangulation).points)
+    others = _reference_without(ref, 2, cfg, Path("rig"))
+    expected = joints_from_landmarks(truth)
+    # The shifted view pulls the reference built from every view towards itself; the one
+    # built without it is where the other three views put the person.
+    assert np.linalg.norm(every - expected, axis=-1).mean() > 0.002
+    np.testing.assert_allclose(others, expected, atol=1e-6)
+    with pytest.raises(PhysposeError, match="multiview_truth"):
+        MaterialConfig(multiview_truth="mine")
+
+
+def test_leaving_out_a_view_that_a_landmark_needs_is_a_clear_error():
+    ref, _ = _multiview_scene(shift_px=0.0)
+    for i in (0, 1):  # landmark 5 is seen by views 2 and 3 only
+        ref.views[i].keypoints2d[:, 5, 2] = 0.0
+    with pytest.raises(PhysposeError, match="without view cam2, landmarks \\[5\\]"):
+        _reference_without(ref, 2, ReferenceConfig(), Path("rig"))

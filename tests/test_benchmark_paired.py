@@ -192,6 +192,21 @@ def test_pooled_runs_pair_within_each_run_and_count_every_runs_clips(tmp_path, c
         main(["compare", str(first), str(second), "--base", "base", "--pool", "--by-run"])
 
 
+def test_a_run_older_than_a_material_setting_is_not_told_apart_by_it(tmp_path, capsys):
+    first = _run(tmp_path, "old", ("base", "new"), _results())
+    doc = json.loads(first.read_text())
+    del doc["config"]["material"]["multiview_truth"]  # written before the setting existed
+    first.write_text(json.dumps(doc))
+    second = _run(tmp_path, "new", ("base", "new"), _results())
+    assert main(["compare", str(first), str(second), "--base", "base"]) == 0
+    assert "prepared their material differently" not in capsys.readouterr().err
+    other = write_results(results_document(_results(), [], BenchmarkConfig(
+        variants=("base", "new"), material=MaterialConfig(multiview_truth="other-views"))),
+        tmp_path / "loo")[0]
+    assert main(["compare", str(first), str(other), "--base", "base"]) == 0
+    assert "prepared their material differently" in capsys.readouterr().err
+
+
 def test_compare_notes_a_run_written_before_it_finished(tmp_path, capsys):
     rows = _results()
     doc = results_document(rows, [], BenchmarkConfig(variants=("base", "new")),

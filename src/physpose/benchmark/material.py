@@ -20,8 +20,10 @@ from physpose.benchmark.variants import VariantContext
 from physpose.detector_sim import DetectorSimConfig, simulate_detections
 from physpose.errors import PhysposeError
 from physpose.mocap import MOCAP_SUFFIXES, MocapClip, body_height, load_mocap
-from physpose.multiview.reference import (ReferenceConfig, build_multiview_reference,
-                                          find_multiview_files)
+from physpose.joints import joints_from_landmarks
+from physpose.multiview.reference import (MultiviewReference, ReferenceConfig,
+                                          build_multiview_reference, fill_missing,
+                                          find_multiview_files, triangulate_observations)
 from physpose.observations import Observations
 from physpose.observe import ObserveConfig, observe
 from physpose.paths import pose2sim_demo_dir, shared_data_dir
@@ -30,6 +32,9 @@ from physpose.video import VIDEO_EXTENSIONS, probe
 KINDS = ("mocap", "multiview", "video")
 CAMERA_HEIGHT_RANGE = (0.1, 20.0)  # m, mocap's virtual camera above the floor
 MAX_SLOW_MOTION = 16  # the slowest footage the benchmark plays motion capture as (x real time)
+# What a multi-view folder's views are scored against: the reference triangulated from every
+# view, or for each view the one triangulated from the other views (leave one out).
+MULTIVIEW_TRUTHS = ("all-views", "other-views")
 
 
 @dataclass(frozen=True)
@@ -52,8 +57,17 @@ class MaterialConfig:
     # slow_motion-th frame is scored on the real clock (what users who do not pass
     # --slow-motion get; docs/benchmark.md). Motion capture only.
     slow_motion: int = 1
+    # Multi-view folders: "all-views" scores each view against the reference triangulated from
+    # every view, its own detections included, which pull that reference towards themselves
+    # (an estimate that stays near the view's detections is favoured); "other-views" against
+    # the reference triangulated without the scored view (unbiased by it, but noisier: fewer
+    # views, and here more of one view's left/right swaps). docs/benchmark.md.
+    multiview_truth: str = "all-views"
 
     def __post_init__(self) -> None:
+        if self.multiview_truth not in MULTIVIEW_TRUTHS:
+            raise PhysposeError(f"multiview_truth={self.multiview_truth!r} is unknown",
+                                remedy=f"use one of {', '.join(MULTIVIEW_TRUTHS)}")
         if not (math.isfinite(self.fps) and self.fps > 0):
             raise PhysposeError(f"fps={self.fps} must be > 0", remedy="pass e.g. --fps 25")
         if not (math.isfinite(self.max_seconds) and self.max_seconds > 0):
@@ -190,19 +204,34 @@ def _video_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:
 def _multiview_clips(folder: Path, cfg: MaterialConfig) -> list[Clip]:
     start = time.perf_counter()
     files = find_multiview_files(folder)
-    ref = build_multiview_reference(folder, ReferenceConfig(
-        observe=_observe_config(files.videos[0], cfg)))
+    ref_cfg = ReferenceConfig(observe=_observe_config(files.videos[0], cfg))
+    ref = build_multiview_reference(folder, ref_cfg)
     elapsed = {"observe+triangulate (all views)": time.perf_counter() - start}
     clips = []
-    for cam, obs in zip(ref.cameras, ref.views):
+    for view, (cam, obs) in enumerate(zip(ref.cameras, ref.views)):
         context = VariantContext(
             camera_K=cam.K if cfg.known_intrinsics else None,
             camera_T_world2cam=cam.T_world2cam if cfg.known_extrinsics else None, seed=cfg.seed)
-        truth = Truth(joints=ref.joints, T_world2cam=cam.T_world2cam, K=cam.K, dist=cam.dist)
+        joints = ref.joints if cfg.multiview_truth == "all-views" else \
+            _reference_without(ref, view, ref_cfg, folder)
+        truth = Truth(joints=joints, T_world2cam=cam.T_world2cam, K=cam.K, dist=cam.dist)
         clips.append(Clip(kind="multiview", name=_segment_name(f"{folder.name}/{cam.name}", cfg),
                           source=str(folder), observations=obs, context=context, truth=truth,
                           timings_s=elapsed))
     return clips
+
+
+def _reference_without(ref: MultiviewReference, view: int, cfg: ReferenceConfig,
+                       folder: Path) -> np.ndarray:
+    """(T, J, 3) the joints of the reference triangulated from every view but `view`."""
+    tri = triangulate_observations(ref.cameras, ref.views, cfg.triangulation, exclude=view)
+    never = np.flatnonzero(~tri.valid.any(axis=0))
+    if never.size:
+        raise PhysposeError(f"without view {ref.cameras[view].name}, landmarks {never.tolist()} "
+                            "could not be triangulated in any frame", path=folder,
+                            remedy="score against the reference from every view "
+                                   "(--multiview-truth all-views)")
+    return joints_from_landmarks(fill_missing(tri.points, tri.valid))
 
 
 def _mocap_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:

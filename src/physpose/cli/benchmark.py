@@ -9,6 +9,7 @@ from pathlib import Path
 
 from physpose.benchmark import (BenchmarkConfig, Material, MaterialConfig, available_variants,
                                 run_benchmark, shared_material, write_results)
+from physpose.benchmark.material import MULTIVIEW_TRUTHS
 from physpose.multiview.reference import find_multiview_files
 from physpose.benchmark.report import render_markdown
 from physpose.errors import PhysposeError
@@ -68,6 +69,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "take its frames at --fps; every X-th frame is scored on the real "
                         "clock. What a user who films slow motion and does not pass "
                         "--slow-motion gets (motion capture only; default: 1)")
+    p.add_argument("--multiview-truth", choices=MULTIVIEW_TRUTHS,
+                   default=MaterialConfig.multiview_truth,
+                   help="what each view of a multi-view folder is scored against: the reference "
+                        "triangulated from every view (its own detections pull it towards "
+                        "themselves) or from the other views alone (noisier; default: "
+                        "%(default)s)")
     p.add_argument("--paired-against", metavar="NAME",
                    help="with two or more variants, the one the others are compared with clip "
                         "by clip (mean +- standard error of the per-clip differences; default: "
@@ -127,7 +134,8 @@ def run(args: argparse.Namespace) -> int:
                                                   known_height=args.known_height,
                                                   seed=args.seed, noiseless=args.noiseless,
                                                   truth_input=args.truth_input,
-                                                  slow_motion=args.slow_motion))
+                                                  slow_motion=args.slow_motion,
+                                                  multiview_truth=args.multiview_truth))
     materials, skipped = _materials(args)
     for message in skipped:
         print(f"benchmark: skipping: {message}", file=sys.stderr)

@@ -5,8 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from dataclasses import asdict
 from pathlib import Path
 
+from physpose.benchmark.material import MaterialConfig
 from physpose.benchmark.paired import (load_results, merge_results, paired_differences,
                                        run_labels)
 from physpose.benchmark.report import render_paired
@@ -44,6 +46,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _material(doc: dict) -> dict | None:
+    """A run's material settings, those it predates taken at their defaults (a setting added
+    later did not change how the older run prepared its material)."""
+    material = doc.get("config", {}).get("material")
+    return None if material is None else {**asdict(MaterialConfig()), **material}
+
+
 def run(args: argparse.Namespace) -> int:
     docs = [load_results(path) for path in args.results]
     labels = run_labels(args.results)
@@ -63,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
                                    "of a run with one")
     if args.out is not None:
         check_output_file(args.out)
-    configs = {json.dumps(doc.get("config", {}).get("material"), sort_keys=True) for doc in docs}
+    configs = {json.dumps(_material(doc), sort_keys=True) for doc in docs}
     if len(configs) > 1 and not args.pool:  # pooled runs differ in their seeds by design
         print("physpose compare: note: the runs prepared their material differently (seed, "
               "length, camera...); their clips are compared as they are", file=sys.stderr)
