@@ -181,15 +181,26 @@ def test_pooled_runs_pair_within_each_run_and_count_every_runs_clips(tmp_path, c
     second = write_results(doc, tmp_path / "s1")[0]
     assert main(["compare", str(first), str(second), "--base", "base", "--pool"]) == 0
     out, err = capsys.readouterr()
-    diffs = [1.0, 2.0, 6.0, 4.0, 5.0, 9.0]
-    mean = sum(diffs) / 6
-    se = math.sqrt(sum((d - mean) ** 2 for d in diffs) / 5) / math.sqrt(6)
-    assert f"| new | 6 | 145 -> 150 (+{mean:.1f} +- {se:.1f}) |" in out
+    # A clip's two seeds are not independent draws: the standard error is cluster-robust over
+    # the three clips (sums of the deviations from the mean 4.5 per clip: a -4, b -2, c +6),
+    # 1.53 where the six differences taken as independent would give 1.18.
+    se = math.sqrt(3 / 2 * (4.0 ** 2 + 2.0 ** 2 + 6.0 ** 2)) / 6
+    assert f"| new | 6 (3 groups) | 145 -> 150 (+4.5 +- {se:.1f}) |" in out and se > 1.5
     assert "prepared their material differently" not in err
     merged = merge_results([{"results": rows}], clip_labels=["s0"])
     assert {r["clip"] for r in merged} == {"a@s0", "b@s0", "c@s0"}
     with pytest.raises(SystemExit):  # the two ways of telling runs apart exclude each other
         main(["compare", str(first), str(second), "--base", "base", "--pool", "--by-run"])
+
+
+def test_grouped_standard_error_is_the_ordinary_one_when_every_clip_is_its_own_group():
+    rows = _results()
+    plain = paired_differences(rows, "base")["mocap"]["new"]["mpjpe_g_mm"]
+    grouped = paired_differences(rows, "base", group=lambda clip: clip)["mocap"]["new"]
+    assert grouped["mpjpe_g_mm"]["standard_error"] == pytest.approx(plain["standard_error"])
+    assert grouped["mpjpe_g_mm"]["groups"] == plain["groups"] == 3
+    one = paired_differences(rows, "base", group=lambda clip: "all")["mocap"]["new"]
+    assert one["mpjpe_g_mm"]["standard_error"] is None  # a single group: no spread to measure
 
 
 def test_a_run_older_than_a_material_setting_is_not_told_apart_by_it(tmp_path, capsys):

@@ -35,22 +35,35 @@ def _value(record: dict, key: str) -> float | None:
     return None
 
 
-def _summary(pairs: list[tuple[float, float]]) -> dict[str, float | int | None]:
+def _summary(pairs: list[tuple[float, float]], groups: list[str] | None = None
+             ) -> dict[str, float | int | None]:
+    """Means of the pairs (base, variant) and of their differences, with the difference's
+    standard error. groups (one name per pair): pairs of one group are not independent (the
+    same clip under several seeds), so the standard error is the cluster-robust one over the
+    groups; with every pair its own group it is the ordinary sd / sqrt(n)."""
     n = len(pairs)
     diffs = [v - b for b, v in pairs]
     mean = sum(diffs) / n
-    se = (math.sqrt(sum((d - mean) ** 2 for d in diffs) / (n - 1) / n) if n > 1 else None)
-    return {"clips": n, "base": sum(b for b, _ in pairs) / n,
+    groups = groups if groups is not None else [str(i) for i in range(n)]
+    sums: dict[str, float] = defaultdict(float)
+    for g, d in zip(groups, diffs):
+        sums[g] += d - mean
+    g = len(sums)
+    se = math.sqrt(g / (g - 1) * sum(s * s for s in sums.values())) / n if g > 1 else None
+    return {"clips": n, "groups": g, "base": sum(b for b, _ in pairs) / n,
             "variant": sum(v for _, v in pairs) / n, "difference": mean, "standard_error": se}
 
 
-def paired_differences(results: list[dict], base: str, variants: list[str] | None = None
-                       ) -> dict[str, dict[str, dict[str, dict]]]:
-    """kind -> variant -> figure -> {clips, base, variant, difference, standard_error}.
+def paired_differences(results: list[dict], base: str, variants: list[str] | None = None,
+                       group=None) -> dict[str, dict[str, dict[str, dict]]]:
+    """kind -> variant -> figure -> {clips, groups, base, variant, difference, standard_error}.
 
     Only clips on which both the variant and ``base`` have a finite figure count for it;
-    ``standard_error`` is None with a single clip. ``variants``: those to compare (default:
-    every variant of the records but the base and the truth's own row, in order of appearance).
+    ``standard_error`` is None with a single clip (or group). ``variants``: those to compare
+    (default: every variant of the records but the base and the truth's own row, in order of
+    appearance). ``group``: clip name -> the name of its group of clips that are not
+    independent (e.g. `pooled_clip`, the same clip in several runs); the standard error is
+    then over the groups (see `_summary`).
     """
     records = {(r["kind"], r["clip"], r["variant"]): r for r in results}
     names = variants if variants is not None else list(dict.fromkeys(
@@ -63,11 +76,13 @@ def paired_differences(results: list[dict], base: str, variants: list[str] | Non
                      and (kind, c, base) in records]
             figures = {}
             for key in keys:
-                pairs = [(_value(records[(kind, c, base)], key),
+                found = [(c, _value(records[(kind, c, base)], key),
                           _value(records[(kind, c, name)], key)) for c in clips]
-                pairs = [(b, v) for b, v in pairs if b is not None and v is not None]
-                if pairs:
-                    figures[key] = _summary(pairs)
+                found = [(c, b, v) for c, b, v in found if b is not None and v is not None]
+                if found:
+                    figures[key] = _summary([(b, v) for _, b, v in found],
+                                            None if group is None else
+                                            [group(c) for c, _, _ in found])
             if figures:
                 out[kind][name] = figures
     return dict(out)
@@ -129,6 +144,12 @@ def merge_results(docs: list[dict], labels: list[str] | None = None,
                 r = dict(r, clip=f"{r['clip']}@{clip_labels[k]}")
             merged[(r["kind"], r["clip"], r["variant"])] = r
     return list(merged.values())
+
+
+def pooled_clip(name: str) -> str:
+    """The clip a pooled record stands for: its name without the ``@RUN`` that
+    `merge_results` appended (a segment's own ``@4s`` kept)."""
+    return name.rsplit("@", 1)[0]
 
 
 def run_labels(paths: list[Path]) -> list[str]:

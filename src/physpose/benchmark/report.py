@@ -164,11 +164,15 @@ def render_paired(paired: dict, base: str) -> list[str]:
                 cells.append(f"{mean_spec[key].format(f['base'])} -> "
                              f"{mean_spec[key].format(f['variant'])} "
                              f"({diff.format(f['difference'])}{se})")
-            rows.append([name, str(max(f["clips"] for f in figures.values()))] + cells)
+            clips = max(f["clips"] for f in figures.values())
+            groups = max(f.get("groups", f["clips"]) for f in figures.values())  # older runs
+            rows.append([name, str(clips) if groups == clips else f"{clips} ({groups} groups)"]
+                        + cells)
         lines += [f"## Paired against `{base}`: {KIND_TITLES.get(kind, kind)}", "",
                   "Per clip, the variant's figure minus the base's on the same clip; mean +- "
                   "standard error over the clips both have (within about two standard errors "
-                  "of zero is within the noise).", ""]
+                  "of zero is within the noise; where clips come in groups, such as one clip "
+                  "under several seeds, the standard error is over the groups).", ""]
         lines += _table(["Variant", "Clips"] + [title[k] for k in keys], rows) + [""]
     return lines
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from physpose.benchmark.material import MaterialConfig
 from physpose.benchmark.paired import (load_results, merge_results, paired_differences,
-                                       run_labels)
+                                       pooled_clip, run_labels)
 from physpose.benchmark.report import render_paired
 from physpose.benchmark.scoring import TRUTH_ROW
 from physpose.errors import PhysposeError
@@ -40,7 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     apart.add_argument("--pool", action="store_true",
                        help="name every clip CLIP@RUN so each run's clips count apart: the "
                             "variants are paired within each run and their differences pooled "
-                            "over the runs (the same clips under several seeds)")
+                            "over the runs (the same clips under several seeds); the standard "
+                            "error treats each clip's runs as one group (cluster-robust), as "
+                            "they are not independent")
     p.add_argument("--out", type=Path, metavar="FILE",
                    help="also write the comparison: FILE.md (markdown) or FILE.json")
     p.set_defaults(func=run)
@@ -81,7 +83,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"physpose compare: note: {path} is incomplete, {len(doc['pending'])} piece(s) "
                   "of material still to come; only the clips it finished are compared",
                   file=sys.stderr)
-    paired = paired_differences(results, args.base, variants)
+    # Pooled, a clip's runs are not independent draws: the standard error is over the clips.
+    paired = paired_differences(results, args.base, variants,
+                                group=pooled_clip if args.pool else None)
     if not paired:
         raise PhysposeError(f"no clip has both {args.base!r} and another variant",
                             remedy="compare runs made on the same clips")
