@@ -25,8 +25,14 @@ from physpose.dynamics.windows import WindowProblem, ranked_fitness, score
 
 def cma_strategy(x0: np.ndarray, cfg: DynamicsConfig, seed: int) -> cma.CMAEvolutionStrategy:
     """pycma's strategy from x0 for ``cfg.iterations`` (separable when ``cfg.diagonal``), its
-    own stopping tests and output off: the loop stops it."""
-    opts = {"seed": seed, "popsize": cfg.popsize, "CMA_diagonal": bool(cfg.diagonal),
+    own stopping tests and output off: the loop stops it.
+
+    Its samples come from a random stream of its own: pycma's ``seed`` alone reseeds NumPy's
+    global stream, which strategies asked in turn would share, so a window's samples would
+    depend on which other windows were searched beside it (independent windows, side-by-side
+    searches) and a resumed run would draw differently. The stream is the one ``seed`` gives
+    the global one, so a strategy searched alone draws the same samples as before."""
+    opts = {"seed": seed, "randn": np.random.RandomState(seed).randn, "popsize": cfg.popsize, "CMA_diagonal": bool(cfg.diagonal),
             "verbose": -9, "verb_log": 0, "verb_disp": 0, "maxiter": max(cfg.iterations, 1),
             "tolfun": 0.0, "tolx": 0.0, "tolfunhist": 0.0, "tolflatfitness": 10 ** 9,
             "tolstagnation": 10 ** 9}
