@@ -385,6 +385,20 @@ def test_every_sequential_window_has_coefficients_of_its_own(fps):
                 assert free.start < free.stop, (frames, win)
 
 
+@pytest.mark.parametrize("fps", [25.0, 30.0])
+def test_independent_windows_cover_every_frame_whatever_the_overlap(fps):
+    # The anchored last window keeps the full length; merging a short last window into the
+    # one before it as well once left frames that no window covered (63 frames at 30 fps in
+    # 1 s windows without overlap: 31), whose joined motion was then 0 / 0.
+    for window, overlap in ((1.0, 0.0), (1.0, 0.05), (0.24, 0.0), (1.0, 0.6)):
+        for frames in range(3, 200):
+            wins = plan_windows(frames, fps, 0.005, window, overlap, anchor_last=True,
+                                min_span=0.5)
+            assert wins[0].first == 0 and wins[-1].last == frames - 1
+            assert all(b.first <= a.last for a, b in zip(wins, wins[1:])), (frames, wins)
+            np.testing.assert_allclose(blend_weights(wins, frames).sum(axis=0), 1.0)
+
+
 def test_a_short_last_window_is_searched_with_the_one_before(clip):
     # 21 frames in windows of 6 without overlap would leave frames 18-20 (0.72-0.80 s)
     # between two knots; they join the window before.
@@ -532,3 +546,22 @@ def test_a_start_takes_the_depth_speed_of_the_estimate_low_passed(clip):
                   checkpoints=False)
         lurch[sigma] = abs((res.qpos[3, :2] - res.qpos[0, :2]) @ sight)
     assert lurch[0.0] > 0.01 and lurch[0.25] < 0.3 * lurch[0.0]
+
+
+@pytest.mark.parametrize("fps", [30.0, 60.0])
+def test_the_com_velocity_target_is_taken_at_the_frame_times(fps):
+    # At 30 or 60 fps the frames fall between the 5 ms simulation steps; the target velocity
+    # is taken frame to frame, so a frame moved onto its nearest step would make a body
+    # gliding at a constant speed speed up and slow down by 10-20 % every three frames.
+    body = build_body(BodyShape.from_height(1.7))
+    fit, obs, _ = simulated_clip(body, "stand", seconds=0.8, fps=fps)
+    t = np.arange(fit.num_frames) / fps
+    qpos = fit.qpos.copy()
+    qpos[:, 0] += 0.8 * t                       # the whole body glides at 0.8 m/s
+    fit = dataclasses.replace(fit, qpos=qpos)
+    cfg = dataclasses.replace(TINY, flat_stance=False, ground_reference=False)
+    setup = optimize_module._setup(optimize_module.sim_model(body), fit, obs, cfg)
+    speed = setup.objective.com_velocity[3:-3, 0]  # away from the clip's padded ends
+    assert np.abs(speed - 0.8).max() < 0.02
+    ref = reference_motion(body, fit, obs, cfg)
+    assert np.abs(np.diff(ref[3:-3, 0]) * fps - 0.8).max() < 0.02

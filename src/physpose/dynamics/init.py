@@ -54,6 +54,21 @@ class Reference:
     def num_steps(self) -> int:
         return int(self.qpos.shape[0]) - 1
 
+    def qpos_at(self, positions: np.ndarray) -> np.ndarray:
+        """(F, 55) the positions at fractional steps (F,) in [0, N], linearly interpolated
+        between steps (the root quaternion renormalised), as the simulation is sampled at
+        frame times: a frame between two steps is not moved onto the nearer one, which at 30
+        or 60 fps would space the frames 5 ms unevenly and make speeds taken frame to frame
+        jump by 10-20 %."""
+        pos = np.clip(np.asarray(positions, dtype=float), 0.0, self.num_steps)
+        i0 = np.minimum(np.floor(pos + 1e-9).astype(int), self.num_steps)
+        i1 = np.minimum(i0 + 1, self.num_steps)
+        w = np.clip(pos - i0, 0.0, 1.0)[:, None]
+        qpos = (1.0 - w) * self.qpos[i0] + w * self.qpos[i1]
+        quat = qpos[:, 3:7]
+        qpos[:, 3:7] = quat / np.maximum(np.linalg.norm(quat, axis=-1, keepdims=True), 1e-12)
+        return qpos
+
 
 def align_quaternion_signs(quat: np.ndarray) -> np.ndarray:
     """Flip quaternions (T, 4) so consecutive ones have a non-negative dot product."""

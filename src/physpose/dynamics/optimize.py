@@ -148,9 +148,11 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
     step_times = np.arange(num_steps) * dt
     grid = KnotGrid(cfg.knot_spacing, num_steps * dt)
     coefs0 = initial_coefficients(grid, step_times, needs.targets[:num_steps])
-    frame_steps = np.round(step_position(np.arange(kin.num_frames), fps, dt)).astype(int)
+    frame_positions = step_position(np.arange(kin.num_frames), fps, dt)
+    frame_steps = np.round(frame_positions).astype(int)
     objective = make_reference(sim.model, grounded, obs.keypoints2d, kin.camera_K,
-                               kin.T_world2cam, fps, smooth_qpos=reference.qpos[frame_steps],
+                               kin.T_world2cam, fps,
+                               smooth_qpos=reference.qpos_at(frame_positions),
                                camera_travel=travel, swing_confidence=cfg.swing_confidence)
     head = mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_SITE, "head")
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
@@ -588,7 +590,8 @@ def reference_motion(body: Body, kinematic_fit: KinematicFit, observations: Obse
     estimate (the benchmark's ``dynamics-reference`` and ``truth-reference``)."""
     _check_inputs(body, kinematic_fit, observations, config)
     setup = _setup(sim_model(body), kinematic_fit, observations, config)
-    return setup.reference.qpos[setup.frame_steps]
+    return setup.reference.qpos_at(step_position(np.arange(kinematic_fit.num_frames),
+                                                 kinematic_fit.fps, setup.reference.dt))
 
 
 def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Observations,

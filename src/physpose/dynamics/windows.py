@@ -62,8 +62,8 @@ def plan_windows(num_frames: int, fps: float, dt: float, window: float, overlap:
     starts = [0]
     while starts[-1] + length < last_frame:
         starts.append(starts[-1] + stride)
-    if len(starts) > 1 and last_frame - starts[-1] < span:
-        starts.pop()
+    if not anchor_last and len(starts) > 1 and last_frame - starts[-1] < span:
+        starts.pop()  # (an anchored last window keeps the full length: nothing to merge)
     if anchor_last and len(starts) > 1:
         starts[-1] = max(0, last_frame - length)
     ends = [min(first + length, last_frame) for first in starts[:-1]] + [last_frame]
