@@ -11,10 +11,14 @@ de Leva (1996), "Adjustments to Zatsiorsky-Seluyanov's segment inertia parameter
 shared among its bodies and geoms in proportion to their volume. Inertia follows from each
 geom's shape at that mass (uniform density within a geom).
 
-Actuation. Position servos (force = kp (target - q) - kv qdot, clipped to +-torque limit) with
-kp = limit / saturation angle, so every joint saturates at the same error, and kv chosen by
-MuJoCo for the requested damping ratio from the joint's reflected inertia in the rest pose.
-Targets are not clipped (the force limit bounds their effect). The root has no actuator.
+Actuation. Position servos (force = kp (target - q), clipped to +-torque limit, and a damping
+-kv qdot applied outside the clip, as the actuator's own unclamped damping) with kp = limit /
+saturation angle, so every joint saturates at the same error, and kv chosen by MuJoCo for the
+requested damping ratio from the joint's reflected inertia in the rest pose (1 / the diagonal
+of the inverse mass matrix, the rest of the body free: a stance leg, loaded by the body, is
+damped less than that ratio says). The simulation does not clip targets (the force limit
+bounds their effect); the dynamics' initial targets are kept within the joint ranges
+(dynamics.init.initial_coefficients). The root has no actuator.
 Integrator implicitfast at 200 Hz (explicit Euler blew up at 200 Hz; DESIGN.md).
 """
 

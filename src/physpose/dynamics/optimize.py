@@ -4,8 +4,9 @@
 
 Sequential windows (the default, as in the paper): each window starts from the simulated state
 of the previous one at its first frame and searches the spline coefficients whose support
-begins inside it; coefficients already acting before its start stay as the previous window left
-them, so the whole clip is one simulation driven by one spline, except where the simulated
+begins inside it; coefficients already acting before its start stay as the previous window's
+search left them, so the whole clip is one simulation (driven by each window's kept targets:
+the spline, or its refined per-step plan), except where the simulated
 COM strays more than ``reset_distance`` from the estimate: the window is cut there and the run
 restarts from the kinematic state (a recorded jump), as it does at a window whose search from
 the simulated state finds no valid sample. Independent windows (the
