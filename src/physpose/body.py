@@ -15,8 +15,9 @@ Actuation. Position servos (force = kp (target - q), clipped to +-torque limit, 
 -kv qdot applied outside the clip, as the actuator's own unclamped damping) with kp = limit /
 saturation angle, so every joint saturates at the same error, and kv chosen by MuJoCo for the
 requested damping ratio from the joint's reflected inertia in the rest pose (1 / the diagonal
-of the inverse mass matrix, the rest of the body free: a stance leg, loaded by the body, is
-damped less than that ratio says). The simulation does not clip targets (the force limit
+of the inverse mass matrix, the rest of the body free: a hip swinging its leg from a pelvis
+held still moves more inertia and is damped less than that ratio says; docs/body_model.md).
+The simulation does not clip targets (the force limit
 bounds their effect); the dynamics' initial targets are kept within the joint ranges
 (dynamics.init.initial_coefficients). The root has no actuator.
 Integrator implicitfast at 200 Hz (explicit Euler blew up at 200 Hz; DESIGN.md).

@@ -61,7 +61,7 @@ class MaterialConfig:
     # every view, its own detections included, which pull that reference towards themselves
     # (an estimate that stays near the view's detections is favoured); "other-views" against
     # the reference triangulated without the scored view (unbiased by it, but noisier: fewer
-    # views, and here more of one view's left/right swaps). docs/benchmark.md.
+    # views, and on the pose2sim demo more of cam02's left/right swaps). docs/benchmark.md.
     multiview_truth: str = "all-views"
 
     def __post_init__(self) -> None:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import math
 from collections import defaultdict
+from collections.abc import Callable
 from pathlib import Path
 
 from physpose.benchmark.report import KIND_COLUMNS, record_figures
@@ -45,17 +46,19 @@ def _summary(pairs: list[tuple[float, float]], groups: list[str] | None = None
     diffs = [v - b for b, v in pairs]
     mean = sum(diffs) / n
     groups = groups if groups is not None else [str(i) for i in range(n)]
-    sums: dict[str, float] = defaultdict(float)
-    for g, d in zip(groups, diffs):
-        sums[g] += d - mean
-    g = len(sums)
-    se = math.sqrt(g / (g - 1) * sum(s * s for s in sums.values())) / n if g > 1 else None
-    return {"clips": n, "groups": g, "base": sum(b for b, _ in pairs) / n,
+    sums: dict[str, float] = defaultdict(float)  # per group, the deviations from the mean
+    for name, d in zip(groups, diffs):
+        sums[name] += d - mean
+    count = len(sums)
+    se = (math.sqrt(count / (count - 1) * sum(s * s for s in sums.values())) / n
+          if count > 1 else None)
+    return {"clips": n, "groups": count, "base": sum(b for b, _ in pairs) / n,
             "variant": sum(v for _, v in pairs) / n, "difference": mean, "standard_error": se}
 
 
 def paired_differences(results: list[dict], base: str, variants: list[str] | None = None,
-                       group=None) -> dict[str, dict[str, dict[str, dict]]]:
+                       group: Callable[[str], str] | None = None
+                       ) -> dict[str, dict[str, dict[str, dict]]]:
     """kind -> variant -> figure -> {clips, groups, base, variant, difference, standard_error}.
 
     Only clips on which both the variant and ``base`` have a finite figure count for it;

@@ -32,10 +32,10 @@ def cma_strategy(x0: np.ndarray, cfg: DynamicsConfig, seed: int) -> cma.CMAEvolu
     depend on which other windows were searched beside it (independent windows, side-by-side
     searches) and a resumed run would draw differently. The stream is the one ``seed`` gives
     the global one, so a strategy searched alone draws the same samples as before."""
-    opts = {"seed": seed, "randn": np.random.RandomState(seed).randn, "popsize": cfg.popsize, "CMA_diagonal": bool(cfg.diagonal),
-            "verbose": -9, "verb_log": 0, "verb_disp": 0, "maxiter": max(cfg.iterations, 1),
-            "tolfun": 0.0, "tolx": 0.0, "tolfunhist": 0.0, "tolflatfitness": 10 ** 9,
-            "tolstagnation": 10 ** 9}
+    opts = {"seed": seed, "randn": np.random.RandomState(seed).randn, "popsize": cfg.popsize,
+            "CMA_diagonal": bool(cfg.diagonal), "verbose": -9, "verb_log": 0, "verb_disp": 0,
+            "maxiter": max(cfg.iterations, 1), "tolfun": 0.0, "tolx": 0.0, "tolfunhist": 0.0,
+            "tolflatfitness": 10 ** 9, "tolstagnation": 10 ** 9}
     return cma.CMAEvolutionStrategy(x0.ravel(), cfg.sigma0, opts)
 
 
