@@ -225,3 +225,15 @@ def test_compare_notes_a_run_written_before_it_finished(tmp_path, capsys):
     path = write_results(doc, tmp_path / "partial")[0]
     assert main(["compare", str(path), "--base", "base"]) == 0
     assert "incomplete, 1 piece(s) of material still to come" in capsys.readouterr().err
+
+
+def test_the_report_says_when_variants_are_averaged_over_different_clips():
+    rows = _results()
+    complete = render_markdown(results_document(rows, [], BenchmarkConfig(
+        variants=("base", "new"))))
+    assert "Mean over 3 clip(s)." in complete
+    failed = [r for r in rows if not (r["variant"] == "new" and r["clip"] == "c")]
+    text = render_markdown(results_document(failed, [], BenchmarkConfig(
+        variants=("base", "new"))))
+    assert "Means over each variant's own clips (" in text and "base 3" in text
+    assert "new 2" in text and "Mean over 3 clip(s)." not in text

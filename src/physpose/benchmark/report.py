@@ -90,6 +90,18 @@ def _time(values: dict, prefix: str = "") -> str:
     return f"{total:.1f}"
 
 
+def _mean_over(by_variant: dict[str, dict]) -> str:
+    """What a kind's means are taken over: one clip count, or each variant's where they differ
+    (a variant that failed on a clip is averaged without it)."""
+    counts = {variant: agg["clips"] for variant, agg in by_variant.items()}
+    if len(set(counts.values())) == 1:
+        return f"Mean over {next(iter(counts.values()))} clip(s)."
+    each = ", ".join(f"{variant} {n}" for variant, n in counts.items())
+    return (f"Means over each variant's own clips ({each}): a variant that failed on a clip is "
+            "averaged without it, so compare them in the paired table, which pairs like with "
+            "like.")
+
+
 def render_markdown(doc: dict) -> str:
     """The results as markdown: one Table-2-shaped table per kind, the paired differences
     against the base variant (with two or more variants), then per-clip tables."""
@@ -111,9 +123,8 @@ def render_markdown(doc: dict) -> str:
     lines.append("")
     for kind, by_variant in doc["aggregate"].items():
         cols = _columns(kind)
-        lines += [f"## {KIND_TITLES[kind]}", "",
-                  f"Mean over {max(a['clips'] for a in by_variant.values())} clip(s). "
-                  "Time: seconds per clip (variant only / with observation).", ""]
+        lines += [f"## {KIND_TITLES[kind]}", "", _mean_over(by_variant)
+                  + " Time: seconds per clip (variant only / with observation).", ""]
         rows = [[variant] + [_fmt(agg.get(key), spec) for _, key, spec in cols]
                 + [_fmt(agg.get("time_s.variant"), "{:.2f}") + " / " + _time(agg, "time_s.")]
                 for variant, agg in by_variant.items()]
