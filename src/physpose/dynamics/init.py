@@ -60,14 +60,19 @@ class Reference:
         frame times: a frame between two steps is not moved onto the nearer one, which at 30
         or 60 fps would space the frames 5 ms unevenly and make speeds taken frame to frame
         jump by 10-20 %."""
-        pos = np.clip(np.asarray(positions, dtype=float), 0.0, self.num_steps)
-        i0 = np.minimum(np.floor(pos + 1e-9).astype(int), self.num_steps)
-        i1 = np.minimum(i0 + 1, self.num_steps)
-        w = np.clip(pos - i0, 0.0, 1.0)[:, None]
-        qpos = (1.0 - w) * self.qpos[i0] + w * self.qpos[i1]
-        quat = qpos[:, 3:7]
-        qpos[:, 3:7] = quat / np.maximum(np.linalg.norm(quat, axis=-1, keepdims=True), 1e-12)
+        i0, i1, w = step_interpolation(positions, self.num_steps)
+        qpos = (1.0 - w[:, None]) * self.qpos[i0] + w[:, None] * self.qpos[i1]
+        qpos[:, 3:7] = quat.normalised(qpos[:, 3:7])
         return qpos
+
+
+def step_interpolation(positions: np.ndarray, last: int
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(i0, i1, w): the steps either side of fractional positions (F,) on a grid 0..last
+    (clipped to it) and the weight of the later one, for linear interpolation."""
+    pos = np.clip(np.asarray(positions, dtype=float), 0.0, last)
+    i0 = np.minimum(np.floor(pos + 1e-9).astype(int), last)
+    return i0, np.minimum(i0 + 1, last), np.clip(pos - i0, 0.0, 1.0)
 
 
 def align_quaternion_signs(quat: np.ndarray) -> np.ndarray:

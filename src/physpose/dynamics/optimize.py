@@ -75,6 +75,7 @@ class _Setup:
     reference: Reference      # smoothed estimate on the step grid
     objective: ObjectiveReference
     step_times: np.ndarray    # (N,) s, time of each control step
+    frame_positions: np.ndarray  # (T,) the fractional simulation step of each frame
     frame_steps: np.ndarray   # (T,) the simulation step nearest each frame
     root_residual: np.ndarray  # (N+1,) body weights, the estimate's unexplained root force
     head_height: np.ndarray   # (T,) m, the head joint's height in the estimate the windows follow
@@ -157,22 +158,23 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
                                camera_travel=travel, swing_confidence=cfg.swing_confidence)
     head = mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_SITE, "head")
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
-                  objective=objective, step_times=step_times, frame_steps=frame_steps,
-                  root_residual=needs.root_residual,
+                  objective=objective, step_times=step_times, frame_positions=frame_positions,
+                  frame_steps=frame_steps, root_residual=needs.root_residual,
                   head_height=site_positions(sim.model, [head], objective.qpos)[:, 0, 2],
-                  start_qvel=_start_velocities(kin, reference, travel, cfg.start_sight_smoothing))
+                  start_qvel=_start_velocities(kin, reference, frame_positions, travel,
+                                               cfg.start_sight_smoothing))
 
 
-def _start_velocities(kin: KinematicFit, reference: Reference, travel: np.ndarray | None,
-                      sigma: float) -> np.ndarray:
+def _start_velocities(kin: KinematicFit, reference: Reference, frame_positions: np.ndarray,
+                      travel: np.ndarray | None, sigma: float) -> np.ndarray:
     """The reference's velocities with the root's depth speed low-passed by ``sigma`` s
-    (init.smooth_sight_velocity; as they are for 0), seen from the fit's camera, which moved
-    along ``travel`` (T, 3) where it travelled with the person."""
+    (init.smooth_sight_velocity; as they are for 0), seen from the fit's camera (at the frames'
+    fractional steps ``frame_positions``), which moved along ``travel`` (T, 3) where it
+    travelled with the person."""
     if sigma <= 0:
         return reference.qvel
-    frame_steps = step_position(np.arange(kin.num_frames), kin.fps, reference.dt)
-    centre = camera_centres(kin.T_world2cam, np.arange(reference.num_steps + 1), frame_steps,
-                            travel)
+    centre = camera_centres(kin.T_world2cam, np.arange(reference.num_steps + 1),
+                            frame_positions, travel)
     return smooth_sight_velocity(reference.qvel, reference.qpos[:, :3], centre, reference.dt,
                                  sigma)
 
@@ -591,8 +593,7 @@ def reference_motion(body: Body, kinematic_fit: KinematicFit, observations: Obse
     estimate (the benchmark's ``dynamics-reference`` and ``truth-reference``)."""
     _check_inputs(body, kinematic_fit, observations, config)
     setup = _setup(sim_model(body), kinematic_fit, observations, config)
-    return setup.reference.qpos_at(step_position(np.arange(kinematic_fit.num_frames),
-                                                 kinematic_fit.fps, setup.reference.dt))
+    return setup.reference.qpos_at(setup.frame_positions)
 
 
 def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Observations,
@@ -634,8 +635,8 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
                           "loss": mean_window_loss(records) if valid else float("inf")})
     k = min(range(len(runs)), key=lambda j: table[j]["loss"])
     outputs, steps, records = runs[k]
-    positions = step_position(np.arange(kinematic_fit.num_frames), kinematic_fit.fps, sim.dt)
-    outputs = {**outputs, **frame_forces(steps, positions, 1.0 / (kinematic_fit.fps * sim.dt))}
+    outputs = {**outputs, **frame_forces(steps, setup.frame_positions,
+                                         1.0 / (kinematic_fit.fps * sim.dt))}
     # The estimate's unexplained root force: the median over each window's steps, and per frame.
     residual = setup.root_residual
     records = [dict(r, reference_residual=float(np.median(residual[r["steps"][0]:

@@ -30,6 +30,11 @@ def about_axis(angle: np.ndarray, axis: int) -> np.ndarray:
     return q
 
 
+def normalised(q: np.ndarray) -> np.ndarray:
+    """Quaternions (..., 4) scaled to unit length (a zero one stays zero)."""
+    return q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
+
+
 def half_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """arccos |<a, b>| (rad, half the angle between the rotations), computed as
     atan2(|v|, |w|) of (w, v) = a* b, which keeps its precision near zero."""

@@ -20,7 +20,9 @@ import numpy as np
 from mujoco import rollout as mj_rollout
 
 from physpose.body import Body
+from physpose.dynamics import quat
 from physpose.dynamics.balance import BalancePlan
+from physpose.dynamics.init import step_interpolation
 from physpose.joints import JOINT_NAMES, LANDMARK_NAMES
 from physpose.skeleton import NQ, NUM_DOF, NV
 
@@ -110,18 +112,14 @@ class Trajectories:
 
     def at(self, positions: np.ndarray) -> FrameSamples:
         """Sample at fractional step positions (F,) in [0, n] by linear interpolation."""
-        n = self.states.shape[1] - 1
-        pos = np.clip(np.asarray(positions, dtype=float), 0.0, n)
-        i0 = np.minimum(np.floor(pos + 1e-9).astype(int), n)
-        i1 = np.minimum(i0 + 1, n)
-        w = np.clip(pos - i0, 0.0, 1.0)[None, :, None]
+        i0, i1, w = step_interpolation(positions, self.states.shape[1] - 1)
+        w = w[None, :, None]
 
         def lerp(a: np.ndarray) -> np.ndarray:
             return (1.0 - w) * a[:, i0] + w * a[:, i1]
 
         qpos = lerp(self.states[..., 1:1 + NQ])
-        quat = qpos[..., 3:7]
-        qpos[..., 3:7] = quat / np.maximum(np.linalg.norm(quat, axis=-1, keepdims=True), 1e-12)
+        qpos[..., 3:7] = quat.normalised(qpos[..., 3:7])
         sens = lerp(self.sensors)
         b, f = sens.shape[:2]
         lm = sens[..., :_NUM_LANDMARK_VALUES].reshape(b, f, len(LANDMARK_NAMES), 3)
