@@ -22,8 +22,8 @@ from physpose.errors import PhysposeError
 from physpose.mocap import MOCAP_SUFFIXES, MocapClip, body_height, load_mocap
 from physpose.joints import joints_from_landmarks
 from physpose.multiview.reference import (MultiviewReference, ReferenceConfig,
-                                          build_multiview_reference, fill_missing,
-                                          find_multiview_files, triangulate_observations)
+                                          build_multiview_reference, find_multiview_files,
+                                          triangulate_views)
 from physpose.observations import Observations
 from physpose.observe import ObserveConfig, observe
 from physpose.paths import pose2sim_demo_dir, shared_data_dir
@@ -224,14 +224,8 @@ def _multiview_clips(folder: Path, cfg: MaterialConfig) -> list[Clip]:
 def _reference_without(ref: MultiviewReference, view: int, cfg: ReferenceConfig,
                        folder: Path) -> np.ndarray:
     """(T, J, 3) the joints of the reference triangulated from every view but `view`."""
-    tri = triangulate_observations(ref.cameras, ref.views, cfg.triangulation, exclude=view)
-    never = np.flatnonzero(~tri.valid.any(axis=0))
-    if never.size:
-        raise PhysposeError(f"without view {ref.cameras[view].name}, landmarks {never.tolist()} "
-                            "could not be triangulated in any frame", path=folder,
-                            remedy="score against the reference from every view "
-                                   "(--multiview-truth all-views)")
-    return joints_from_landmarks(fill_missing(tri.points, tri.valid))
+    arrays = triangulate_views(ref.cameras, ref.views, cfg.triangulation, folder, exclude=view)
+    return joints_from_landmarks(arrays["landmarks"])
 
 
 def _mocap_clips(path: Path, cfg: MaterialConfig) -> list[Clip]:

@@ -145,7 +145,7 @@ def build_multiview_reference(folder: str | Path, cfg: ReferenceConfig = Referen
     cache = Cache("multiview_reference")
     arrays = cache.get(key) if cfg.use_cache else None
     if arrays is None:
-        arrays = _triangulate_views(cameras, views, cfg.triangulation, Path(folder))
+        arrays = triangulate_views(cameras, views, cfg.triangulation, Path(folder))
         if cfg.use_cache:
             cache.put(key, arrays)
     return MultiviewReference(folder=str(folder), fps=views[0].fps,
@@ -174,15 +174,24 @@ def triangulate_observations(cameras: tuple[CameraCalibration, ...],
     return triangulate(np.stack([c.projection for c in cameras]), np.stack(keypoints), cfg)
 
 
-def _triangulate_views(cameras, views, cfg: TriangulationConfig, folder: Path
-                       ) -> dict[str, np.ndarray]:
-    tri = triangulate_observations(cameras, views, cfg)
+def triangulate_views(cameras, views, cfg: TriangulationConfig, folder: Path,
+                      exclude: int | None = None) -> dict[str, np.ndarray]:
+    """The reference's arrays from the views' detections (``exclude``: one view left out):
+    landmarks with their gaps filled, which were triangulated, the views' errors and use.
+    A landmark triangulated in no frame is an error naming the folder (and the view left
+    out)."""
+    tri = triangulate_observations(cameras, views, cfg, exclude=exclude)
     valid = tri.valid
     never = np.flatnonzero(~valid.any(axis=0))
     if never.size:
-        raise PhysposeError(f"landmarks {never.tolist()} could not be triangulated in any frame",
-                            path=folder, remedy="check that the person is visible in at least "
-                                                "two views and the calibration matches")
+        without = "" if exclude is None else f"without view {cameras[exclude].name}, "
+        raise PhysposeError(f"{without}landmarks {never.tolist()} could not be triangulated in "
+                            "any frame", path=folder,
+                            remedy="check that the person is visible in at least two views "
+                                   "and the calibration matches" + (
+                                       "" if exclude is None else "; or score against the "
+                                       "reference from every view (--multiview-truth "
+                                       "all-views)"))
     landmarks = fill_missing(tri.points, valid)
     return {"landmarks": landmarks, "landmarks_valid": valid, "view_errors": tri.view_errors,
             "used": tri.used}
