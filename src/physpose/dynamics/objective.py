@@ -127,7 +127,7 @@ def joint_quaternions(qpos: np.ndarray) -> np.ndarray:
     joints = quat.multiply(quat.multiply(quat.about_axis(ang[..., 0], 1),
                                          quat.about_axis(ang[..., 1], 0)),
                            quat.about_axis(ang[..., 2], 2))
-    root = qpos[..., 3:7] / np.linalg.norm(qpos[..., 3:7], axis=-1, keepdims=True)
+    root = quat.normalised(qpos[..., 3:7])
     return np.concatenate([root[..., None, :], joints], axis=-2)
 
 

@@ -35,7 +35,7 @@ import numpy as np
 from tqdm import tqdm
 
 from physpose.body import Body
-from physpose.dynamics import checkpoint
+from physpose.dynamics import checkpoint, quat
 from physpose.dynamics.config import DynamicsConfig
 from physpose.dynamics.forces import STEP_KEYS, frame_forces, missing_steps, step_forces
 from physpose.dynamics.init import (Reference, geom_lowest, ground_motion, ground_state,
@@ -76,7 +76,6 @@ class _Setup:
     objective: ObjectiveReference
     step_times: np.ndarray    # (N,) s, time of each control step
     frame_positions: np.ndarray  # (T,) the fractional simulation step of each frame
-    frame_steps: np.ndarray   # (T,) the simulation step nearest each frame
     root_residual: np.ndarray  # (N+1,) body weights, the estimate's unexplained root force
     head_height: np.ndarray   # (T,) m, the head joint's height in the estimate the windows follow
     start_qvel: np.ndarray    # (N+1, 54) velocities a window started from the estimate takes
@@ -151,7 +150,6 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
     grid = KnotGrid(cfg.knot_spacing, num_steps * dt)
     coefs0 = initial_coefficients(grid, step_times, needs.targets[:num_steps])
     frame_positions = step_position(np.arange(kin.num_frames), fps, dt)
-    frame_steps = np.round(frame_positions).astype(int)
     objective = make_reference(sim.model, grounded, obs.keypoints2d, kin.camera_K,
                                kin.T_world2cam, fps,
                                smooth_qpos=reference.qpos_at(frame_positions),
@@ -159,7 +157,7 @@ def _setup(sim: SimModel, kin: KinematicFit, obs: Observations, cfg: DynamicsCon
     head = mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_SITE, "head")
     return _Setup(sim=sim, windows=windows, grid=grid, coefs0=coefs0, reference=reference,
                   objective=objective, step_times=step_times, frame_positions=frame_positions,
-                  frame_steps=frame_steps, root_residual=needs.root_residual,
+                  root_residual=needs.root_residual,
                   head_height=site_positions(sim.model, [head], objective.qpos)[:, 0, 2],
                   start_qvel=_start_velocities(kin, reference, frame_positions, travel,
                                                cfg.start_sight_smoothing))
@@ -552,8 +550,7 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
                 part[:, 3:7] *= np.where(sign < 0, -1.0, 1.0)[:, None]
             acc[win.first:win.last + 1] += wk * part
         joined[k] = acc
-    quat = joined["qpos"][:, 3:7]
-    joined["qpos"][:, 3:7] = quat / np.linalg.norm(quat, axis=-1, keepdims=True)
+    joined["qpos"][:, 3:7] = quat.normalised(joined["qpos"][:, 3:7])
     # The windows' kept steps one after another (not cross-faded).
     steps = {k: np.concatenate([results[w][0][k][:kept[w]] for w in range(len(wins))])
              for k in _STEP_OUTPUT_KEYS}
@@ -659,5 +656,5 @@ def optimize_dynamics(body: Body, kinematic_fit: KinematicFit, observations: Obs
         foot_heights=foot_heights(sim.model, outputs["qpos"], body.foot_geom_ids),
         ctrl=steps["ctrl"], grf=outputs["grf"], cop=outputs["cop"], torques=outputs["torques"],
         windows=records, timings=timing, config=config.identity(), candidates=candidates,
-        reference_residual=residual[setup.frame_steps], stretch_shifts=shifts,
-        camera_travel=travel)
+        reference_residual=residual[np.round(setup.frame_positions).astype(int)],
+        stretch_shifts=shifts, camera_travel=travel)
