@@ -30,8 +30,12 @@ def cma_strategy(x0: np.ndarray, cfg: DynamicsConfig, seed: int) -> cma.CMAEvolu
     Its samples come from a random stream of its own: pycma's ``seed`` alone reseeds NumPy's
     global stream, which strategies asked in turn would share, so a window's samples would
     depend on which other windows were searched beside it (independent windows, side-by-side
-    searches) and a resumed run would draw differently. The stream is the one ``seed`` gives
-    the global one, so a strategy searched alone draws the same samples as before."""
+    searches) and a resumed run would draw differently. The stream starts where ``seed`` puts
+    the global one, so the first four iterations draw what the shared stream drew. After them,
+    pycma's two-point step-size rule (its choice for 300 or more coordinates, as most windows
+    search) takes coordinates for a consistency check from the global stream, which the shared
+    stream's samples then followed and these do not: since stop 83 the default's searches draw
+    other samples than before it (docs/dynamics_history.md, stop 85)."""
     opts = {"seed": seed, "randn": np.random.RandomState(seed).randn, "popsize": cfg.popsize,
             "CMA_diagonal": bool(cfg.diagonal), "verbose": -9, "verb_log": 0, "verb_disp": 0,
             "maxiter": max(cfg.iterations, 1), "tolfun": 0.0, "tolx": 0.0, "tolfunhist": 0.0,
