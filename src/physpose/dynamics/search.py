@@ -32,10 +32,11 @@ def cma_strategy(x0: np.ndarray, cfg: DynamicsConfig, seed: int) -> cma.CMAEvolu
     depend on which other windows were searched beside it (independent windows, side-by-side
     searches) and a resumed run would draw differently. The stream starts where ``seed`` puts
     the global one, so the first four iterations draw what the shared stream drew. After them,
-    pycma's two-point step-size rule (its choice for 300 or more coordinates, as most windows
-    search) takes coordinates for a consistency check from the global stream, which the shared
-    stream's samples then followed and these do not: since stop 83 the default's searches draw
-    other samples than before it (docs/dynamics_history.md, stop 85)."""
+    pycma's two-point step-size rule (its choice for 300 or more coordinates: the fast preset's
+    1 s windows searched from the estimate's state have 312, continued ones 240) takes coordinates
+    for a consistency check from the global stream, which the shared stream's samples then
+    followed and these do not: since stop 83 such searches draw other samples than before it
+    (docs/dynamics_history.md, stop 85)."""
     opts = {"seed": seed, "randn": np.random.RandomState(seed).randn, "popsize": cfg.popsize,
             "CMA_diagonal": bool(cfg.diagonal), "verbose": -9, "verb_log": 0, "verb_disp": 0,
             "maxiter": max(cfg.iterations, 1), "tolfun": 0.0, "tolx": 0.0, "tolfunhist": 0.0,
