@@ -45,6 +45,7 @@ def _args(*argv: str):
     (["--height", "9"], "height 9.0 m is outside"),
     (["--candidates", "0"], "--candidates 0 must be >= 1"),
     (["--searches", "-1"], "--searches -1 must be >= 1"),
+    (["--search-iterations", "-1"], "--search-iterations -1 must be >= 0"),
     (["--balance-hz", "-1"], "--balance-hz -1.0 must be a finite number >= 0"),
     (["--restart-distance", "inf"], "--restart-distance inf must be a finite number > 0"),
     (["--refine", "-2"], "--refine -2 must be >= 0"),
@@ -139,6 +140,11 @@ def test_flags_make_the_pipeline_config():
                            ).dynamics.candidates == 3
     assert pipeline_config(_args("v.mp4", "--out", "o", "--searches", "2")
                            ).dynamics.searches == 2
+    assert default.dynamics.iterations == 30
+    assert pipeline_config(_args("v.mp4", "--out", "o", "--search-iterations", "0")
+                           ).dynamics.iterations == 0
+    assert pipeline_config(_args("v.mp4", "--out", "o", "--preset", "paper",
+                                 "--search-iterations", "50")).dynamics.iterations == 50
     assert default.auto_support
     assert not pipeline_config(_args("v.mp4", "--out", "o", "--no-auto-support")).auto_support
     assert not default.dynamics.balance.enabled

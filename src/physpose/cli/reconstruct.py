@@ -65,6 +65,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--candidates", type=int, metavar="N",
                    help="optimise the whole clip N times (seeds 0..N-1) and keep the run with "
                         "the lowest loss: N times the time (default 1)")
+    p.add_argument("--search-iterations", type=int, metavar="N",
+                   help="CMA-ES iterations per window (default: the preset's, 30 in fast). 0 "
+                        "skips the search: each window keeps the better of its two start "
+                        "guesses and the iLQR refinement works from it, a quick preview at "
+                        "about 0.4x the fast preset's time, as near the truth on motion "
+                        "capture but with more restarts, a higher velocity error and, on a "
+                        "travelling camera, feet that slide more (docs/dynamics.md, No search)")
     p.add_argument("--searches", type=int, metavar="N",
                    help="CMA-ES searches per window side by side (other seeds, the same "
                         "start); their average is kept, which cancels most of each search's "
@@ -223,6 +230,12 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                       "pass how many whole-clip runs to keep the best of, e.g. --candidates 3 "
                       "(the default is 1)")
         dynamics = dataclasses.replace(dynamics, candidates=args.candidates)
+    if args.search_iterations is not None:
+        _check_option(args.search_iterations >= 0, "--search-iterations",
+                      args.search_iterations, ">= 0",
+                      "pass a number of CMA-ES iterations per window, e.g. --search-iterations "
+                      "30, or 0 to skip the search")
+        dynamics = dataclasses.replace(dynamics, iterations=args.search_iterations)
     if args.searches is not None:
         _check_option(args.searches >= 1, "--searches", args.searches, ">= 1",
                       "pass how many CMA-ES searches to average per window, e.g. --searches 2, "
