@@ -114,6 +114,17 @@ def test_searching_legs_and_trunk_keeps_the_other_targets(clip):
     np.testing.assert_allclose(res.ctrl[:, kept], init.ctrl[:, kept], atol=1e-12)
 
 
+def test_without_search_iterations_the_seed_changes_nothing(clip):
+    # The seed only draws CMA-ES samples; the CLI refuses candidates or side-by-side searches
+    # without search iterations because of this.
+    cfg = dataclasses.replace(TINY, iterations=0, tracking_start=True,
+                              refine=RefineConfig(iterations=2))
+    a = run(clip, dataclasses.replace(cfg, seed=0), checkpoints=False)
+    b = run(clip, dataclasses.replace(cfg, seed=5), checkpoints=False)
+    np.testing.assert_array_equal(a.qpos, b.qpos)
+    np.testing.assert_array_equal(a.ctrl, b.ctrl)
+
+
 def test_candidates_keep_the_lowest_loss_seed(clip):
     cfg = dataclasses.replace(TINY, popsize=8, iterations=6, sigma0=0.005)  # small steps improve here
     best = run(clip, dataclasses.replace(cfg, candidates=2, seed=3), checkpoints=False)

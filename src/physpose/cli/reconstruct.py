@@ -241,6 +241,13 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
                       "pass how many CMA-ES searches to average per window, e.g. --searches 2, "
                       "or leave it out for the preset's")
         dynamics = dataclasses.replace(dynamics, searches=args.searches)
+    if dynamics.iterations == 0:
+        # Only CMA-ES draws from the seed: without its iterations every candidate and every
+        # side-by-side search would be the same run.
+        for option, value in (("--candidates", dynamics.candidates),
+                              ("--searches", dynamics.searches)):
+            _check_option(value == 1, option, value, "1 with --search-iterations 0",
+                          f"leave {option} out: without the search every run draws the same")
     if args.threads is not None:
         _check_option(args.threads >= 1, "--threads", args.threads, ">= 1",
                       "pass a number of threads, e.g. --threads 2, or leave it out to use "
