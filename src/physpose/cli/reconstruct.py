@@ -83,8 +83,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="iLQR iterations refining each window's servo targets towards the "
                         "estimate and the detections after the search (0: off; default: the "
                         "preset's, 6 in fast, "
-                        "0 in paper). On a simulated clip six iterations took 8.5 s per second "
-                        "of video beside the search's 11.8 s (docs/dynamics.md, Measured)")
+                        "0 in paper). On a simulated clip they took 4.8 s of the fast preset's "
+                        "13.7 s per second of video (docs/dynamics.md, Measured, Speed at the "
+                        "head)")
     p.add_argument("--threads", type=int, metavar="N",
                    help="threads for the simulated rollouts (default: every core this process "
                         f"may use, {available_cores()} here); the result is the same for any N, "
