@@ -58,10 +58,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("video", type=Path, help="video file, or a keypoints .json/.npz")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--preset", choices=tuple(PRESETS), default="fast",
-                   help="optimisation budget: fast (default; 14-35 s of dynamics per second "
-                        "of video over the motion-capture clips, on the 2-core machines it was "
-                        "measured on; the slowest clip measured, 57) or paper (2000 x 100 samples "
-                        "per 1 s window: hours per second of video)")
+                   help="optimisation budget: fast (default; 13-29 s of dynamics per second "
+                        "of video over the motion-capture clips and 10-26 s over the real ones, "
+                        "measured one run at a time on a 2-core machine) or paper (2000 x 100 "
+                        "samples per 1 s window: about 19 min per window, 43 min per second of "
+                        "video, on the same machine)")
     p.add_argument("--candidates", type=int, metavar="N",
                    help="optimise the whole clip N times (seeds 0..N-1) and keep the run with "
                         "the lowest loss: N times the time (default 1)")
