@@ -207,11 +207,11 @@ def test_the_fit_runs_in_double_precision_under_old_and_new_jax(monkeypatch):
     import jax
     import jax.numpy as jnp
 
-    from physpose.kinematics.fit import _double_precision
-    with _double_precision():
+    from physpose.kinematics.precision import double_precision
+    with double_precision():
         assert jnp.zeros(2).dtype == jnp.float64
     assert jnp.zeros(2).dtype == jnp.float32
     asked = []
     monkeypatch.setattr(jax, "enable_x64", lambda value: asked.append(value) or "context",
                         raising=False)
-    assert _double_precision() == "context" and asked == [True]
+    assert double_precision() == "context" and asked == [True]

@@ -41,6 +41,7 @@ from physpose.kinematics.losses import rotvec_matrix
 from physpose.kinematics.objective import Params, weight_dict
 from physpose.kinematics.pose_fit import (Problem, initial_pose, make_params, make_problem,
                                           settings_from)
+from physpose.kinematics.precision import double_precision
 from physpose.kinematics.result import KinematicFit
 from physpose.kinematics.shape_fit import fit_shape
 from physpose.kinematics.surface import SurfacePoints, centre_of_mass, place, surface_points
@@ -68,15 +69,6 @@ def enable_compilation_cache() -> None:
 
 def stderr_log(message: str) -> None:
     print(f"kinematics: {message}", file=sys.stderr, flush=True)
-
-
-def _double_precision():
-    """JAX's 64-bit mode for the fit's duration: ``jax.enable_x64(True)`` from JAX 0.8, whose
-    later releases removed the experimental context manager that older ones have."""
-    if hasattr(jax, "enable_x64"):
-        return jax.enable_x64(True)
-    from jax.experimental import enable_x64
-    return enable_x64()
 
 
 def fit_kinematics(observations: Observations, config: KinematicConfig = KinematicConfig(), *,
@@ -229,7 +221,7 @@ def fit_variants(obs: Observations, variants: tuple[str, ...], cfg: KinematicCon
     timer = _Timer(log)
     if cfg.compile_cache:
         enable_compilation_cache()
-    with _double_precision():
+    with double_precision():
         ctx = _prepare(obs, cfg, height, mass, K, timer)
         focal = not ctx.K_given and cfg.camera.refine_focal
         free = ("root_pos", "root_rotvec", "angles", "log_depth_scale")

@@ -31,6 +31,14 @@ tilt the plane towards or away from the camera (4 degrees there, which moved the
 by 15 %). So the plane fit also estimates that gain: frame t's body is scaled about the camera
 centre (moved along its rays, so its image stays the same) by exp(g u_t), u_t its relative
 distance from the clip's mean distance, with a Gaussian prior on g (`depth_gain_sigma`).
+
+The plane is fitted in double precision, as the whole kinematic fit is (fit_kinematics);
+estimate_plane sets it itself, so a caller outside that fit gets the same plane. In single
+precision L-BFGS stopped where the loss's rounding noise hid its last descent, at a place set
+by that noise: moving the points by a micrometre moved the camera height by up to 4 cm, and
+so did another processor's rounding (the tilted-floor test, which called it outside the fit,
+put the camera 5.8 cm high on one machine and 8.2 on another; 3.6 in double precision). In
+double precision the same micrometre moves it by under a millimetre.
 """
 
 from __future__ import annotations
@@ -46,6 +54,7 @@ from physpose.kinematics.config import GroundConfig
 from physpose.kinematics.evidence import pad, padded_length
 from physpose.kinematics.losses import ground_term
 from physpose.kinematics.optim import minimize
+from physpose.kinematics.precision import double_precision
 
 _GP_SCALE = 0.02  # m: L_gp is divided by this, so a 2 cm change weighs like one prior sigma
 
@@ -138,7 +147,14 @@ def estimate_plane(points: np.ndarray, left: np.ndarray, right: np.ndarray, com:
     points: (T, P, 3) camera axes, frames with evidence only; left, right: (P,) bool sole
     points of each foot; com: (T, 3) centres of mass. Returns the plane and its loss.
     """
-    points = np.asarray(points, dtype=float)
+    with double_precision():  # see the module's docstring: single precision stops short
+        return _best_plane(np.asarray(points, dtype=float), left, right,
+                           np.asarray(com, dtype=float), cfg)
+
+
+def _best_plane(points: np.ndarray, left: np.ndarray, right: np.ndarray, com: np.ndarray,
+                cfg: GroundConfig) -> tuple[np.ndarray, float]:
+    """estimate_plane's search: the best of the descents from every start."""
     feet = np.flatnonzero(left | right)
     starts = []
     for up in (UP_LEVEL, -UP_LEVEL):  # a camera upright, and one upside down
