@@ -35,7 +35,7 @@ distance from the clip's mean distance, with a Gaussian prior on g (`depth_gain_
 The plane is fitted in double precision, as the whole kinematic fit is (fit_kinematics);
 estimate_plane sets it itself, so a caller outside that fit gets the same plane. In single
 precision L-BFGS stopped where the loss's rounding noise hid its last descent, at a place set
-by that noise: moving the points by a micrometre moved the camera height by up to 4 cm, and
+by that noise: moving the points by a micrometre moved the camera height by up to 4.3 cm, and
 so did another processor's rounding (the tilted-floor test, which called it outside the fit,
 put the camera 5.8 cm high on one machine and 8.2 on another; 3.6 in double precision). In
 double precision the same micrometre moves it by under a millimetre.
