@@ -37,15 +37,22 @@ def _floor_angle(plane: np.ndarray, R_world2cam: np.ndarray) -> float:
     return float(np.degrees(np.arccos(np.clip(plane[:3] @ n_true, -1.0, 1.0))))
 
 
+def _walk_under_tilted_camera(tilt_deg: float, roll_deg: float):
+    """(surface, points, com, R_world2cam, camera centre) of a 40-frame walk seen by a camera
+    2.5 m up, pitched down by tilt_deg and rolled by roll_deg."""
+    shape = BodyShape.from_height(1.7)
+    q = walking_qpos(shape, 40, heading_deg=30.0)
+    R, centre = _camera_along_y(tilt_deg, roll_deg), np.array([0.5, -5.0, 2.5])
+    surface, points, com = _posed_points(shape, q, R, -R @ centre)
+    return surface, points, com, R, centre
+
+
 @pytest.mark.parametrize("tilt_deg, roll_deg", [(25.0, 0.0), (10.0, 8.0), (40.0, -5.0),
                                                 (10.0, 180.0), (25.0, 150.0), (10.0, -120.0)])
 def test_tilted_floor_is_recovered(tilt_deg, roll_deg):
     """A camera pitched down by tilt_deg (and rolled; a half turn: held upside down) sees a
     person walk on the floor: the estimated plane is the floor in camera axes."""
-    shape = BodyShape.from_height(1.7)
-    q = walking_qpos(shape, 40, heading_deg=30.0)
-    R, centre = _camera_along_y(tilt_deg, roll_deg), np.array([0.5, -5.0, 2.5])  # 2.5 m up
-    surface, points, com = _posed_points(shape, q, R, -R @ centre)
+    surface, points, com, R, centre = _walk_under_tilted_camera(tilt_deg, roll_deg)
     plane, _ = estimate_plane(points, surface.left_foot, surface.right_foot, com, GroundConfig())
     angle = _floor_angle(plane, R)
     assert angle < 1.5, angle
@@ -61,10 +68,7 @@ def test_a_micrometre_does_not_move_the_floor(tilt_deg, roll_deg):
     its loss in single precision the fit stopped where rounding noise hid the descent: these
     draws moved the 40-degree camera's height by 4.1 cm, other draws the 25-degree ones' by
     1.4 and 2.4 cm."""
-    shape = BodyShape.from_height(1.7)
-    q = walking_qpos(shape, 40, heading_deg=30.0)
-    R, centre = _camera_along_y(tilt_deg, roll_deg), np.array([0.5, -5.0, 2.5])
-    surface, points, com = _posed_points(shape, q, R, -R @ centre)
+    surface, points, com, _, _ = _walk_under_tilted_camera(tilt_deg, roll_deg)
     noise = np.random.default_rng(0).normal(scale=1e-6, size=(2, *points.shape))
     planes = [estimate_plane(points + e, surface.left_foot, surface.right_foot, com,
                              GroundConfig())[0] for e in noise]
