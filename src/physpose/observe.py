@@ -51,6 +51,7 @@ config and OBSERVE_VERSION, with the warnings the run gave, which a cache hit gi
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import math
@@ -61,6 +62,7 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from physpose import native_chatter
 from physpose import video as videolib
 from physpose.cache import Cache, stage_key
 from physpose.camera_motion import estimate_camera_motion, stabilize
@@ -151,11 +153,19 @@ class PoseDetector:
         import mediapipe as mp  # imported here: loading it costs ~1 s
 
         self.mask_long_side = cfg.mask_long_side
-        self._pose = mp.solutions.pose.Pose(
-            static_image_mode=static, model_complexity=cfg.model_complexity,
-            smooth_landmarks=True, enable_segmentation=cfg.mask_long_side > 0,
-            smooth_segmentation=True, min_detection_confidence=cfg.min_detection_confidence,
-            min_tracking_confidence=cfg.min_tracking_confidence)
+        # The graph's threads log natively to stderr while it starts and on its first frames.
+        self._quiet = contextlib.ExitStack()
+        self._quiet.enter_context(native_chatter.filtered())
+        try:
+            self._pose = mp.solutions.pose.Pose(
+                static_image_mode=static, model_complexity=cfg.model_complexity,
+                smooth_landmarks=True, enable_segmentation=cfg.mask_long_side > 0,
+                smooth_segmentation=True,
+                min_detection_confidence=cfg.min_detection_confidence,
+                min_tracking_confidence=cfg.min_tracking_confidence)
+        except BaseException:
+            self._quiet.close()
+            raise
 
     def __enter__(self) -> "PoseDetector":
         return self
@@ -164,7 +174,10 @@ class PoseDetector:
         self.close()
 
     def close(self) -> None:
-        self._pose.close()
+        try:
+            self._pose.close()
+        finally:
+            self._quiet.close()
 
     def detect(self, image_bgr: np.ndarray) -> FrameDetection | None:
         """Landmarks of the most prominent person in a BGR image (H, W, 3), or None."""
