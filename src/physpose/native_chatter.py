@@ -60,7 +60,7 @@ def filtered() -> Iterator[None]:
 
     Where descriptor 2 cannot be duplicated (closed), the block runs with it untouched.
     """
-    sys.stderr.flush()
+    _flush_python_stderr()
     try:
         terminal = os.dup(STDERR)
     except OSError:
@@ -75,9 +75,15 @@ def filtered() -> Iterator[None]:
     try:
         yield
     finally:
-        sys.stderr.flush()
+        _flush_python_stderr()
         os.dup2(terminal, STDERR)  # closes the pipe's write end: the forwarder reads its end
         forwarder.join(JOIN_SECONDS)
         if not forwarder.is_alive():  # else left to the daemon thread, which still uses them
             os.close(source)
             os.close(terminal)
+
+
+def _flush_python_stderr() -> None:
+    """Write out what Python buffered for stderr before descriptor 2 changes (none: no stream)."""
+    if sys.stderr is not None:
+        sys.stderr.flush()
