@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -103,6 +104,17 @@ def test_no_person_video_via_the_console_script(tmp_path):
     assert proc.returncode == 2
     assert "nobody.mp4: a person was found in only 0 of 8 frames" in proc.stderr
     assert "Traceback" not in proc.stderr and "Traceback" not in proc.stdout
+
+
+def test_a_run_with_stderr_closed_still_ends_with_its_exit_code(tmp_path):
+    """Started with descriptor 2 closed (`2>&-`), Python has no sys.stderr; the progress bar
+    must not crash the run."""
+    video = make_noise_video(tmp_path / "nobody.mp4", 8)
+    proc = subprocess.run([str(PHYSPOSE), "observe", str(video), "--out", str(tmp_path / "o")],
+                          stdout=subprocess.PIPE, text=True, timeout=120,
+                          preexec_fn=lambda: os.close(2))
+    assert proc.returncode == 2, proc.stdout
+    assert "Traceback" not in proc.stdout
 
 
 def test_video_end_to_end_then_cached(pose2sim_demo, tmp_path, capsys):

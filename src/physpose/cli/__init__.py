@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import errno
 import importlib
+import os
 import re
 import sys
 
@@ -55,7 +56,17 @@ def join_signed_values(argv: list[str]) -> list[str]:
     return joined
 
 
+def stand_in_for_closed_streams() -> None:
+    """Give a process started with stdout or stderr closed (`2>&-`, some schedulers), in which
+    Python sets them to None, os.devnull instead: progress bars and messages would otherwise
+    crash the run before it writes its files."""
+    for name in ("stdout", "stderr"):
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(os.devnull, "w"))  # noqa: SIM115 (for the process' life)
+
+
 def main(argv: list[str] | None = None) -> int:
+    stand_in_for_closed_streams()
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser().parse_args(join_signed_values(argv))
     try:
