@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -115,6 +116,23 @@ def test_a_run_with_stderr_closed_still_ends_with_its_exit_code(tmp_path):
                           preexec_fn=lambda: os.close(2))
     assert proc.returncode == 2, proc.stdout
     assert "Traceback" not in proc.stdout
+
+
+def test_output_read_by_a_reader_that_went_away_ends_quietly(tmp_path):
+    """`physpose ... | head`: the reader closed the pipe before the messages came; the run
+    ends as a tool that SIGPIPE ends, without a misleading file-system error."""
+    keypoints = _keypoints(tmp_path)
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        proc = subprocess.run([str(PHYSPOSE), "observe", str(keypoints), "--out",
+                               str(tmp_path / "o")], stdout=write_end,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write_end)
+    assert proc.returncode == 128 + signal.SIGPIPE, proc.stderr
+    for word in ("error", "Broken pipe", "Traceback"):
+        assert word not in proc.stderr, proc.stderr
 
 
 def test_video_end_to_end_then_cached(pose2sim_demo, tmp_path, capsys):

@@ -7,6 +7,8 @@ import errno
 import importlib
 import os
 import re
+import select
+import signal
 import sys
 
 from physpose import __version__
@@ -65,6 +67,17 @@ def stand_in_for_closed_streams() -> None:
             setattr(sys, name, open(os.devnull, "w"))  # noqa: SIM115 (for the process' life)
 
 
+def stdout_gone() -> bool:
+    """Whether stdout is a pipe whose reader has closed it."""
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return False
+    poller = select.poll()
+    poller.register(fd, select.POLLOUT)
+    return any(events & select.POLLERR for _, events in poller.poll(0))
+
+
 def main(argv: list[str] | None = None) -> int:
     stand_in_for_closed_streams()
     argv = sys.argv[1:] if argv is None else argv
@@ -75,6 +88,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"physpose {args.command}: error: {err}", file=sys.stderr)
         return 2
     except OSError as err:  # the file system refused: a path that is missing, wrong or locked
+        if isinstance(err, BrokenPipeError) and stdout_gone():
+            # Not the file system: the reader of the output went away (`physpose ... | head`).
+            # Stop quietly, as a tool that SIGPIPE ends does (the files written so far stay).
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+            return 128 + signal.SIGPIPE
         where = f"{err.filename}: " if err.filename else ""
         remedy = ("free some space there and run the same command again (work finished so "
                   "far is kept)" if err.errno in (errno.ENOSPC, errno.EDQUOT) else
