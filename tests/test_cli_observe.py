@@ -111,9 +111,9 @@ def test_a_run_with_stderr_closed_still_ends_with_its_exit_code(tmp_path):
     """Started with descriptor 2 closed (`2>&-`), Python has no sys.stderr; the progress bar
     must not crash the run."""
     video = make_noise_video(tmp_path / "nobody.mp4", 8)
-    proc = subprocess.run([str(PHYSPOSE), "observe", str(video), "--out", str(tmp_path / "o")],
-                          stdout=subprocess.PIPE, text=True, timeout=120,
-                          preexec_fn=lambda: os.close(2))
+    command = [str(PHYSPOSE), "observe", str(video), "--out", str(tmp_path / "o")]
+    proc = subprocess.run(["sh", "-c", 'exec "$@" 2>&-', "sh", *command],
+                          stdout=subprocess.PIPE, text=True, timeout=120)
     assert proc.returncode == 2, proc.stdout
     assert "Traceback" not in proc.stdout
 
