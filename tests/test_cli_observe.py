@@ -107,6 +107,16 @@ def test_no_person_video_via_the_console_script(tmp_path):
     assert "Traceback" not in proc.stderr and "Traceback" not in proc.stdout
 
 
+def test_a_file_that_is_no_video_gets_physposes_message_without_opencvs_warning(tmp_path):
+    fake = tmp_path / "fake.mp4"
+    fake.write_text("this is not a video\n" * 50)
+    proc = subprocess.run([str(PHYSPOSE), "observe", str(fake), "--out", str(tmp_path / "o")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "fake.mp4: cannot open this file as a video" in proc.stderr
+    assert "WARN" not in proc.stderr, proc.stderr
+
+
 def test_a_run_with_stderr_closed_still_ends_with_its_exit_code(tmp_path):
     """Started with descriptor 2 closed (`2>&-`), Python has no sys.stderr; the progress bar
     must not crash the run."""

@@ -78,10 +78,24 @@ def stdout_gone() -> bool:
     return any(events & select.POLLERR for _, events in poller.poll(0))
 
 
+OPENCV_ERRORS_ONLY = 2  # cv2.setLogLevel's level for errors and worse
+
+
+def quiet_opencv() -> None:
+    """Keep OpenCV's own warnings (e.g. "[ WARN:0@11.6] global cap.cpp:215 open
+    VIDEOIO(FFMPEG): backend is generally available but can't be used to capture by name"
+    before physpose says why a file is not a video) off the terminal; physpose reports what
+    went wrong itself. Set by the command line only: a library caller keeps its own level."""
+    import cv2  # noqa: PLC0415 (not needed to print help)
+
+    cv2.setLogLevel(OPENCV_ERRORS_ONLY)
+
+
 def main(argv: list[str] | None = None) -> int:
     stand_in_for_closed_streams()
     argv = sys.argv[1:] if argv is None else argv
     args = build_parser().parse_args(join_signed_values(argv))
+    quiet_opencv()
     try:
         return int(args.func(args) or 0)
     except PhysposeError as err:
