@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import platform
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
@@ -546,3 +550,16 @@ def test_leaving_out_a_view_that_a_landmark_needs_is_a_clear_error():
         ref.views[i].keypoints2d[:, 5, 2] = 0.0
     with pytest.raises(PhysposeError, match="without view cam2, landmarks \\[5\\]"):
         _reference_without(ref, 2, ReferenceConfig(), Path("rig"))
+
+
+@pytest.mark.skipif(platform.machine() not in ("x86_64", "AMD64"),
+                    reason="OpenBLAS core types named here are x86's")
+def test_results_name_the_openblas_kernels_that_decide_the_digits():
+    """The same run gives other digits under other OpenBLAS kernels (docs/benchmark.md), so
+    the document names the ones in use; OPENBLAS_CORETYPE picks them."""
+    code = ("import numpy; from physpose.benchmark.runner import machine_description; "
+            "print(machine_description())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "OPENBLAS_CORETYPE": "Nehalem"}, timeout=120,
+                         check=True).stdout
+    assert out.strip().endswith("OpenBLAS kernels Nehalem"), out

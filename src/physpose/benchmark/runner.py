@@ -9,6 +9,8 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 
+import threadpoolctl
+
 from physpose.benchmark.material import Clip, Material, MaterialConfig, load_clips
 from physpose.benchmark.paired import paired_differences
 from physpose.benchmark.report import aggregate
@@ -91,6 +93,29 @@ def run_clips(clips: Sequence[Clip], variants: Sequence[str],
     return results, failures
 
 
+def machine_description() -> str:
+    """The machine, with what decides whether another machine's run gives the same digits: the
+    processor and the kernels its OpenBLAS (NumPy's, SciPy's) picked for it at run time
+    (docs/benchmark.md, The same digits on another machine)."""
+    kernels = sorted({str(lib.get("architecture")) for lib in threadpoolctl.threadpool_info()
+                      if lib.get("internal_api") == "openblas"})
+    blas = f"; OpenBLAS kernels {', '.join(kernels)}" if kernels else ""
+    return (f"{platform.machine()}{_processor_name()}, {os.cpu_count()} cores (shared with "
+            f"other work){blas}")
+
+
+def _processor_name() -> str:
+    """", Intel(R) Xeon(R) ..." from /proc/cpuinfo where Linux gives it, else ""."""
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as info:
+            for line in info:
+                if line.startswith("model name"):
+                    return f", {line.split(':', 1)[1].strip()}"
+    except OSError:
+        pass
+    return ""
+
+
 def results_document(results: list[dict], failures: list[dict], cfg: BenchmarkConfig, *,
                      skipped: Sequence[str] = (), command: str = "",
                      pending: Sequence[str] = ()) -> dict:
@@ -100,7 +125,7 @@ def results_document(results: list[dict], failures: list[dict], cfg: BenchmarkCo
     base = cfg.base
     return {
         "command": command,
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores (shared with other work)",
+        "machine": machine_description(),
         "config": asdict(cfg),
         "skipped": list(skipped),
         "pending": list(pending),
