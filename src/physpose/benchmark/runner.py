@@ -105,7 +105,7 @@ def machine_description() -> str:
 
 
 def _processor_name() -> str:
-    """", Intel(R) Xeon(R) ..." from /proc/cpuinfo where Linux gives it, else ""."""
+    """The processor's model name as ", NAME" (Linux's /proc/cpuinfo), or an empty string."""
     try:
         with open("/proc/cpuinfo", encoding="utf-8", errors="replace") as info:
             for line in info:
