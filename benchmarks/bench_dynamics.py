@@ -19,12 +19,11 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
-import platform
 import time
 
 import numpy as np
 
+from physpose.benchmark.runner import machine_description
 from physpose.body import build_body, standing_qpos
 from physpose.dynamics import PRESETS, optimize_dynamics
 from physpose.dynamics.balance import BalanceGains, balance_plan
@@ -91,7 +90,7 @@ def main() -> None:
     body = build_body(BodyShape.from_height(1.75))
     fit, obs, _ = simulated_clip(body, args.motion, seconds=args.seconds)
     video_s = (fit.num_frames - 1) / fit.fps
-    out = {"machine": f"{platform.machine()}, {os.cpu_count()} cores (shared)",
+    out = {"machine": machine_description(),
            "clip": f"simulated {args.motion}, {video_s:.2f} s at {fit.fps:g} fps",
            "rollouts_per_s": rollout_rate(body),
            "rollouts_per_s_with_balance": rollout_rate(body, balance=True),

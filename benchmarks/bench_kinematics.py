@@ -14,13 +14,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from physpose.benchmark.runner import machine_description
 from physpose.kinematics import KinematicConfig, fit_kinematics
 from physpose.paths import shared_data_dir
 
@@ -77,7 +77,7 @@ def main() -> None:
             print(f"{variant:6s} {name:24s} {rows[-1]['run']}: {seconds:6.1f} s, "
                   f"{rows[-1]['seconds_per_frame']:.3f} s/frame (load {load:.1f})", flush=True)
     warm = [r["seconds_per_frame"] for r in rows if r["run"] == "warm"]
-    doc = {"machine": f"{platform.machine()}, {os.cpu_count()} cores (shared with other work)",
+    doc = {"machine": machine_description(),
            "rows": rows, "warm_seconds_per_frame_mean": float(np.mean(warm)) if warm else None}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(doc, indent=1) + "\n")
