@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import platform
 import time
 from pathlib import Path
@@ -21,6 +20,7 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
+from physpose.benchmark.runner import machine_description
 from physpose.body import Body, build_body, standing_qpos
 from physpose.shape import BodyShape
 from physpose.skeleton import DOF_NAMES, NUM_DOF
@@ -99,7 +99,7 @@ def main() -> None:
     build_s = time.perf_counter() - t0
     steps_1s = int(round(1.0 / body.model.opt.timestep))
     result = {
-        "machine": {"platform": platform.platform(), "cpus": os.cpu_count(),
+        "machine": {"description": machine_description(), "platform": platform.platform(),
                     "mujoco": mujoco.__version__},
         "body": {"height": args.height, "total_mass": body.total_mass, "dof": body.model.nu,
                  "nq": body.model.nq, "ngeom": body.model.ngeom,

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import platform
 import time
 from pathlib import Path
 
+from physpose.benchmark.runner import machine_description
 from physpose.camera_motion import estimate_camera_motion
 from physpose.demo_data import demo_videos
 from physpose.observe import ObserveConfig, PoseDetector, observe
@@ -92,7 +92,7 @@ def main() -> None:
               f"{r['mediapipe_ms_per_frame']:6.1f} {r['model_load_s']:6.2f} "
               f"{r['observe_frames_per_s']:11.1f} {100 * r['camera_motion_share']:8.1f} "
               f"{r['camera_motion']:>8s}")
-    meta = {"machine": platform.machine(), "cpus": os.cpu_count(), "python": platform.python_version(),
+    meta = {"machine": machine_description(), "python": platform.python_version(),
             "target_fps": args.fps, "note": "decode = grab+retrieve of the planned frames "
             "(skipped frames included); mediapipe = Pose.process incl. BGR->RGB and mask resize; "
             "camera % = the camera-motion step's time over the whole observe() time (which "

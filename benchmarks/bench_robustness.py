@@ -20,7 +20,6 @@ Exits 1 when a variant failed.
 from __future__ import annotations
 
 import argparse
-import os
 import platform
 import time
 import traceback
@@ -30,6 +29,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from physpose.benchmark.runner import machine_description
 from physpose.benchmark.report import results_json
 from physpose.metrics import fallen
 from physpose.outputs import motion_metrics
@@ -202,7 +202,7 @@ def main() -> None:
               f"at {fps:.3f} fps", flush=True)
         rows.append(run_variant(name, video, args.out / name))
     print_table(rows)
-    meta = {"machine": platform.machine(), "cpus": os.cpu_count(),
+    meta = {"machine": machine_description(),
             "python": platform.python_version(), "sources": SOURCES, "skipped": skipped}
     (args.out / "results.json").write_text(results_json({"meta": meta, "rows": rows}) + "\n")
     print(f"wrote {args.out / 'results.json'}")

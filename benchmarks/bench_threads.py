@@ -16,11 +16,11 @@ import argparse
 import dataclasses
 import json
 import os
-import platform
 import time
 
 import numpy as np
 
+from physpose.benchmark.runner import machine_description
 from physpose.body import build_body
 from physpose.dynamics import PRESETS, optimize_dynamics
 from physpose.dynamics.synthetic import simulated_clip
@@ -52,7 +52,7 @@ def main() -> None:
     body = build_body(BodyShape.from_height(1.75))
     fit, obs, _ = simulated_clip(body, args.motion, seconds=args.seconds)
     video_s = (fit.num_frames - 1) / fit.fps
-    out = {"machine": f"{platform.machine()}, {cores} cores",
+    out = {"machine": machine_description(),
            "clip": f"simulated {args.motion}, {video_s:.2f} s at {fit.fps:g} fps", "runs": []}
     print(f"{out['clip']}; {out['machine']}; fast preset")
     first = None

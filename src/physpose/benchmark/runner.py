@@ -95,13 +95,26 @@ def run_clips(clips: Sequence[Clip], variants: Sequence[str],
 
 def machine_description() -> str:
     """The machine, with what decides whether another machine's run gives the same digits: the
-    processor and the kernels its OpenBLAS (NumPy's, SciPy's) picked for it at run time
-    (docs/benchmark.md, The same digits on another machine)."""
-    kernels = sorted({str(lib.get("architecture")) for lib in threadpoolctl.threadpool_info()
-                      if lib.get("internal_api") == "openblas"})
+    processor and the kernels that each loaded OpenBLAS (NumPy's, SciPy's, OpenCV's) picked for
+    it at run time (docs/benchmark.md, The same digits on another machine)."""
+    kernels = openblas_kernels()
     blas = f"; OpenBLAS kernels {', '.join(kernels)}" if kernels else ""
     return (f"{platform.machine()}{_processor_name()}, {os.cpu_count()} cores (shared with "
             f"other work){blas}")
+
+
+def openblas_kernels() -> list[str]:
+    """Each loaded OpenBLAS's kernel name with the package that ships it, "SkylakeX (scipy)",
+    sorted by package. Wheels keep their copy in a ``<package>.libs`` folder."""
+    named = []
+    for lib in threadpoolctl.threadpool_info():
+        if lib.get("internal_api") != "openblas":
+            continue
+        path = str(lib.get("filepath", ""))
+        folder = os.path.basename(os.path.dirname(path))
+        owner = folder.removesuffix(".libs") if folder.endswith(".libs") else os.path.basename(path)
+        named.append((owner, f"{lib.get('architecture')} ({owner})"))
+    return [text for _, text in sorted(named)]
 
 
 def _processor_name() -> str:
