@@ -171,6 +171,21 @@ def test_without_raised_feet_the_support_pass_changes_nothing(noisy_fits):
     assert np.array_equal(off.qpos, fits["SO+GT"].qpos)
 
 
+def test_progress_shows_a_bar_per_step_and_changes_nothing(perfect, capsys):
+    """A clip of minutes spends minutes in a step: its bar counts the L-BFGS iterations."""
+    cfg = KinematicConfig.preset("SO+GT", use_cache=False)
+    logged: list[str] = []
+    quiet = fit_kinematics(perfect.observations, cfg, height=perfect.shape.height)
+    assert capsys.readouterr().err == ""
+    shown = fit_kinematics(perfect.observations, cfg, height=perfect.shape.height,
+                           log=logged.append, progress=True)
+    err = capsys.readouterr().err
+    for step in ("init", "pose", "temporal", "ground_plane", "ground_pose"):
+        assert f"kinematics {step}:" in err and f"{step} done in" in " ".join(logged), step
+    assert " iterations" in err
+    assert np.array_equal(quiet.qpos, shown.qpos)
+
+
 def test_cache_returns_the_same_fit(perfect, tmp_path, monkeypatch):
     monkeypatch.setenv("PHYSPOSE_CACHE_DIR", str(tmp_path))
     cfg = KinematicConfig.preset("S")

@@ -169,7 +169,7 @@ def reconstruct(video_or_observations: str | Path | Observations, out_dir: str |
         timings.lap("observe")
         obs, found = _screen_observations(obs, config.slow_motion)
         kin = fit_kinematics(obs, config.kinematics, height=height, mass=mass,
-                             **({"log": stderr_log} if progress else {}))
+                             progress=progress, **({"log": stderr_log} if progress else {}))
         timings.lap("kinematics")
         scene, found_in_fit = _scene_for(kin, config)
         found |= found_in_fit

@@ -39,7 +39,8 @@ def _kinematic_only(obs, config: PipelineConfig, out: Path):
     from physpose.kinematics.fit import fit_kinematics, stderr_log  # noqa: PLC0415
     from physpose.kinematics.variants import reconstruction_of  # noqa: PLC0415
 
-    recon = reconstruction_of(fit_kinematics(obs, config.kinematics, log=stderr_log), obs)
+    recon = reconstruction_of(fit_kinematics(obs, config.kinematics, log=stderr_log,
+                                             progress=True), obs)
     recon.save(out / RECONSTRUCTION_FILE)
     return recon
 

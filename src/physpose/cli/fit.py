@@ -78,7 +78,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"warning: {rate}", file=sys.stderr, flush=True)
     config = KinematicConfig.preset(args.variant, use_cache=not args.no_cache)
     fit = fit_kinematics(obs, config, height=args.height, mass=args.mass, camera_K=K,
-                         log=stderr_log)
+                         log=stderr_log, progress=sys.stderr.isatty())
     height_found, tilt_found = camera_height(fit.T_world2cam), camera_tilt(fit.T_world2cam)
     doubt = camera_pose_message(height_found, tilt_found)
     if doubt:

@@ -21,12 +21,14 @@ import json
 import logging
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import jax
 import numpy as np
 from scipy.spatial.transform import Rotation
+from tqdm import tqdm
 
 from physpose import diagnostics, supports
 from physpose.cache import Cache, stage_key
@@ -39,6 +41,7 @@ from physpose.kinematics.evidence import Evidence, gather_evidence, padded_lengt
 from physpose.kinematics.ground import estimate_plane, level_plane
 from physpose.kinematics.losses import rotvec_matrix
 from physpose.kinematics.objective import Params, weight_dict
+from physpose.kinematics.optim import reporting_iterations
 from physpose.kinematics.pose_fit import (Problem, initial_pose, make_params, make_problem,
                                           settings_from)
 from physpose.kinematics.precision import double_precision
@@ -73,12 +76,14 @@ def stderr_log(message: str) -> None:
 
 def fit_kinematics(observations: Observations, config: KinematicConfig = KinematicConfig(), *,
                    height: float | None = None, mass: float | None = None,
-                   camera_K: np.ndarray | None = None, log: Log = _quiet) -> KinematicFit:
+                   camera_K: np.ndarray | None = None, log: Log = _quiet,
+                   progress: bool = False) -> KinematicFit:
     """Fit the kinematic variant of `config` to the observations.
 
     height (m) fixes the body's scale, mass (kg) its mass (else from the stature at BMI 22);
     camera_K (3, 3) overrides the observations' intrinsics. Results are cached by observations,
-    config and these arguments (config.use_cache).
+    config and these arguments (config.use_cache). log: each step's duration; progress: a bar
+    on stderr per step, counting its iterations.
     """
     expect_type(observations, Observations, "fit_kinematics' observations",
                 "pass Observations, e.g. physpose.pipeline.load_observations(path, "
@@ -98,7 +103,7 @@ def fit_kinematics(observations: Observations, config: KinematicConfig = Kinemat
         fit = _from_arrays(hit)
     else:
         fit = fit_variants(observations, (config.variant,), config, height=height, mass=mass,
-                           camera_K=K, log=log)[config.variant]
+                           camera_K=K, log=log, progress=progress)[config.variant]
         if config.use_cache:
             cache.put(key, _to_arrays(fit))
     message = diagnostics.label_exchange_message(fit.label_exchanges, fit.fps)
@@ -137,58 +142,70 @@ class _Context:
 
 
 class _Timer:
-    def __init__(self, log: Log):
-        self.log, self.timings, self.clock = log, {}, time.perf_counter()
+    """Times the fit's steps and logs each one's duration; with `progress`, a bar counts a
+    step's L-BFGS iterations while it runs (on a clip of minutes a step takes minutes)."""
 
-    def lap(self, step: str) -> None:
-        now = time.perf_counter()
-        seconds, self.clock = now - self.clock, now
-        self.timings[step] = self.timings.get(step, 0.0) + seconds
-        self.log(f"{step} done in {seconds:.1f} s")
+    def __init__(self, log: Log, progress: bool = False):
+        self.log, self.progress, self.timings = log, progress, {}
+
+    @contextmanager
+    def step(self, name: str) -> Iterator[None]:
+        start = time.perf_counter()
+        bar = tqdm(desc=f"kinematics {name}", unit=" iterations", leave=False, file=sys.stderr,
+                   disable=not self.progress, dynamic_ncols=True)
+        try:
+            with reporting_iterations(bar.update):
+                yield
+        finally:
+            bar.close()
+        seconds = time.perf_counter() - start
+        self.timings[name] = self.timings.get(name, 0.0) + seconds
+        self.log(f"{name} done in {seconds:.1f} s")
 
 
 def _prepare(obs: Observations, cfg: KinematicConfig, height, mass, K_given, timer: _Timer
              ) -> _Context:
     """Evidence, camera, shape (+S) and the initial poses of every frame (variant S)."""
-    focal_prior = cam.focal_from_fov(obs.image_size, cfg.camera.diagonal_fov_deg)
-    K = (cam.intrinsics(obs.image_size, focal_prior) if K_given is None
-         else cam.check_intrinsics(K_given, obs.source))
-    focal_prior = focal_prior if K_given is None else float(K[0, 0])
-    ev = gather_evidence(obs, K, cfg.pose.min_confidence, cfg.pose.ray_aligned_world)
-    exchanges: dict = {}
-    if cfg.fix_swaps:
-        ev, exchanges = unswap(ev)
-    reference = surface_points(BodyShape.from_height(1.7))
-    settings = settings_from(cfg.pose, cfg.ground_plane, cfg.shape, cfg.camera, reference)
-    timer.lap("evidence")
+    with timer.step("evidence"):
+        focal_prior = cam.focal_from_fov(obs.image_size, cfg.camera.diagonal_fov_deg)
+        K = (cam.intrinsics(obs.image_size, focal_prior) if K_given is None
+             else cam.check_intrinsics(K_given, obs.source))
+        focal_prior = focal_prior if K_given is None else float(K[0, 0])
+        ev = gather_evidence(obs, K, cfg.pose.min_confidence, cfg.pose.ray_aligned_world)
+        exchanges: dict = {}
+        if cfg.fix_swaps:
+            ev, exchanges = unswap(ev)
+        reference = surface_points(BodyShape.from_height(1.7))
+        settings = settings_from(cfg.pose, cfg.ground_plane, cfg.shape, cfg.camera, reference)
 
-    sf = fit_shape(ev, K, cfg, settings, reference.offset, height=height, mass=mass)
-    shape = sf.shape
-    surface = surface_points(shape)
-    if surface.blocks != reference.blocks:
-        raise AssertionError("the surface sampling depends on the shape")
-    timer.lap("shape")
+    with timer.step("shape"):
+        sf = fit_shape(ev, K, cfg, settings, reference.offset, height=height, mass=mass)
+        shape = sf.shape
+        surface = surface_points(shape)
+        if surface.blocks != reference.blocks:
+            raise AssertionError("the surface sampling depends on the shape")
 
-    n = ev.num_frames
-    frames, length = np.arange(n), padded_length(n)
-    root_pos, R0, angles = initial_pose(ev, frames, shape.bones(), K, sf.depth_scale,
-                                        sf.world_scale)
-    params = make_params(root_pos, np.zeros_like(root_pos), angles, shape.bones(),
-                         sf.depth_scale, sf.world_scale, K[0, 0], length)
-    problem = make_problem(ev, frames, length, R0, K, focal_prior, root_pos[:, 2],
-                           surface.offset, height, settings, np.zeros(4), cfg.pose.hard_limits)
-    w = cfg.pose.weights
-    params, _ = problem.run(params, ("root_rotvec", "angles"), weight_dict(
-        world_landmarks=w.world_landmarks, pose_prior=w.pose_prior,
-        joint_limits=w.joint_limits), cfg.pose.init_iterations)
-    params, _ = problem.run(params, ("root_pos",), weight_dict(reprojection=w.reprojection),
-                            cfg.pose.init_iterations)
-    ctx = _Context(obs=obs, cfg=cfg, ev=ev, K=K, focal_prior=focal_prior,
-                   K_given=K_given is not None, shape=shape, surface=surface, height=height,
-                   params=params, problem=problem, timings=timer.timings,
-                   label_exchanges=exchanges)
-    ctx = dataclasses.replace(ctx, problem=ctx.problem_at(params))
-    timer.lap("init")
+    with timer.step("init"):
+        n = ev.num_frames
+        frames, length = np.arange(n), padded_length(n)
+        root_pos, R0, angles = initial_pose(ev, frames, shape.bones(), K, sf.depth_scale,
+                                            sf.world_scale)
+        params = make_params(root_pos, np.zeros_like(root_pos), angles, shape.bones(),
+                             sf.depth_scale, sf.world_scale, K[0, 0], length)
+        problem = make_problem(ev, frames, length, R0, K, focal_prior, root_pos[:, 2],
+                               surface.offset, height, settings, np.zeros(4),
+                               cfg.pose.hard_limits)
+        w = cfg.pose.weights
+        params, _ = problem.run(params, ("root_rotvec", "angles"), weight_dict(
+            world_landmarks=w.world_landmarks, pose_prior=w.pose_prior,
+            joint_limits=w.joint_limits), cfg.pose.init_iterations)
+        params, _ = problem.run(params, ("root_pos",), weight_dict(reprojection=w.reprojection),
+                                cfg.pose.init_iterations)
+        ctx = _Context(obs=obs, cfg=cfg, ev=ev, K=K, focal_prior=focal_prior,
+                       K_given=K_given is not None, shape=shape, surface=surface,
+                       height=height, params=params, problem=problem, timings=timer.timings,
+                       label_exchanges=exchanges)
+        ctx = dataclasses.replace(ctx, problem=ctx.problem_at(params))
     return ctx
 
 
@@ -210,15 +227,16 @@ def _pose_terms(cfg: KinematicConfig, temporal: bool, ground: bool, focal: bool)
 
 def fit_variants(obs: Observations, variants: tuple[str, ...], cfg: KinematicConfig, *,
                  height: float | None = None, mass: float | None = None,
-                 camera_K: np.ndarray | None = None, log: Log = _quiet
-                 ) -> dict[str, KinematicFit]:
+                 camera_K: np.ndarray | None = None, log: Log = _quiet,
+                 progress: bool = False) -> dict[str, KinematicFit]:
     """Several variants of one clip sharing their common steps (S -> SO -> SO+T; the plane of
     SO+G from SO's poses, of SO+GT from SO+T's). `cfg`'s variant flags are ignored; its other
-    settings apply to all. No caching (see fit_kinematics)."""
+    settings apply to all. No caching (see fit_kinematics). progress: a bar on stderr per
+    step, counting its iterations."""
     for v in variants:
         KinematicConfig.preset(v)  # unknown names fail early
     K = camera_K if camera_K is not None else obs.camera_K
-    timer = _Timer(log)
+    timer = _Timer(log, progress)
     if cfg.compile_cache:
         enable_compilation_cache()
     with double_precision():
@@ -230,27 +248,28 @@ def fit_variants(obs: Observations, variants: tuple[str, ...], cfg: KinematicCon
         stages: dict[str, tuple[Params, Problem, dict]] = {"S": (ctx.params, ctx.problem, {})}
         wanted = set(variants)
         if wanted - {"S"}:
-            p, losses = ctx.problem.run(ctx.params, free, _pose_terms(cfg, False, False, focal),
-                                        cfg.pose.iterations)
-            stages["SO"] = (p, ctx.problem_at(p), losses)
-            timer.lap("pose")
+            with timer.step("pose"):
+                p, losses = ctx.problem.run(ctx.params, free,
+                                            _pose_terms(cfg, False, False, focal),
+                                            cfg.pose.iterations)
+                stages["SO"] = (p, ctx.problem_at(p), losses)
         if wanted & {"SO+T", "SO+GT"}:
-            p, problem, _ = stages["SO"]
-            p, losses = problem.run(p, free, _pose_terms(cfg, True, False, focal),
-                                    cfg.pose.iterations)
-            stages["SO+T"] = (p, ctx.problem_at(p), losses)
-            timer.lap("temporal")
+            with timer.step("temporal"):
+                p, problem, _ = stages["SO"]
+                p, losses = problem.run(p, free, _pose_terms(cfg, True, False, focal),
+                                        cfg.pose.iterations)
+                stages["SO+T"] = (p, ctx.problem_at(p), losses)
         for name, base, temporal in (("SO+G", "SO", False), ("SO+GT", "SO+T", True)):
             if name not in wanted:
                 continue
             p, problem, _ = stages[base]
             for _ in range(cfg.ground_plane.rounds):
-                plane = _estimate_ground(ctx, p, problem)
-                timer.lap("ground_plane")
-                problem = ctx.problem_at(p, plane)
-                p, losses = problem.run(p, free, _pose_terms(cfg, temporal, True, focal),
-                                        cfg.pose.iterations)
-                timer.lap("ground_pose")
+                with timer.step("ground_plane"):
+                    plane = _estimate_ground(ctx, p, problem)
+                with timer.step("ground_pose"):
+                    problem = ctx.problem_at(p, plane)
+                    p, losses = problem.run(p, free, _pose_terms(cfg, temporal, True, focal),
+                                            cfg.pose.iterations)
             if cfg.ground_plane.raised_supports:
                 p, problem, losses = _stand_on_supports(
                     ctx, p, problem, losses, _pose_terms(cfg, temporal, True, focal), free,
@@ -291,9 +310,9 @@ def _stand_on_supports(ctx: _Context, params: Params, problem: Problem, losses: 
     heights = supports.support_heights(joints, diagnostics.raised_runs(joints, fps), fps)
     if not heights.any():
         return params, problem, losses
-    problem = ctx.problem_at(params, plane, heights)
-    params, losses = problem.run(params, free, terms, ctx.cfg.pose.iterations)
-    timer.lap("support_pose")
+    with timer.step("support_pose"):
+        problem = ctx.problem_at(params, plane, heights)
+        params, losses = problem.run(params, free, terms, ctx.cfg.pose.iterations)
     return params, problem, losses
 
 

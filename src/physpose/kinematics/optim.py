@@ -6,11 +6,27 @@ the optimiser sees only the free fields flattened into one float64 vector.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from contextvars import ContextVar
 from typing import NamedTuple
 
 import numpy as np
 import scipy.optimize
+
+
+_ON_ITERATION: ContextVar[Callable[[], object] | None] = ContextVar("on_iteration", default=None)
+
+
+@contextmanager
+def reporting_iterations(callback: Callable[[], object]) -> Iterator[None]:
+    """Within the block every `minimize` calls callback() after each L-BFGS iteration (a
+    progress bar's update), however deep the step that calls it."""
+    token = _ON_ITERATION.set(callback)
+    try:
+        yield
+    finally:
+        _ON_ITERATION.reset(token)
 
 
 class Result(NamedTuple):
@@ -66,7 +82,9 @@ def minimize(value_and_grad: Callable, params: NamedTuple, free: tuple[str, ...]
         lo, hi = np.concatenate(lo), np.concatenate(hi)
         x0 = np.clip(x0, lo, hi)
         box = scipy.optimize.Bounds(lo, hi)
+    report = _ON_ITERATION.get()
     res = scipy.optimize.minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=box,
+                                  callback=None if report is None else lambda _x: report(),
                                   options={"maxiter": iterations, "ftol": tolerance,
                                            "gtol": 1e-10, "maxcor": 10})
     return Result(params=unpack(res.x), value=float(res.fun), iterations=int(res.nit),
