@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from physpose.cli import SUBCOMMANDS, build_parser, main
-from physpose.cli.reconstruct import (parse_formats, pipeline_config,
-                                      print_summary, restarts_line, undetected_line)
+from physpose.cli.reconstruct import (check_input, duration_note, parse_formats,
+                                      pipeline_config, print_summary, restarts_line,
+                                      undetected_line)
 from physpose.dynamics import PRESETS
 from physpose.dynamics.config import available_cores
 from physpose.dynamics.objective import ObjectiveWeights
@@ -175,6 +176,21 @@ def test_flags_make_the_pipeline_config():
     assert paper == ObjectiveWeights()  # the paper's weights
     no_tv = pipeline_config(_args("v.mp4", "--out", "o", "--weight", "tv=0")).dynamics.weights
     assert no_tv == dataclasses.replace(PRESETS["fast"].weights, tv=0.0)
+
+
+def test_the_seconds_to_analyse_are_known_before_observing(clip):
+    config = pipeline_config(_args(str(clip), "--out", "o", "--start", "0.4", "--end", "1.6"))
+    size, seconds = check_input(clip, config)
+    assert size == (320, 240) and seconds == pytest.approx(1.2)
+
+
+def test_a_long_clip_is_told_what_the_physics_will_cost_beforehand():
+    assert duration_note(29.0, "fast") is None
+    note = duration_note(180.0, "fast")
+    assert note.startswith("180 s of video") and "about 30-87 min" in note
+    assert "about 90 min to 4.3 h" in duration_note(180.0, "fast", candidates=3)
+    # The paper preset costs 43 min per second of video: told for any clip.
+    assert "about 86 min" in duration_note(2.0, "paper")
 
 
 def test_export_formats():

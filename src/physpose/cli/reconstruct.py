@@ -37,6 +37,13 @@ _OUTPUT_NAMES = {"metrics": "metrics", "report": "report (open in a browser)",
                  "json": "joint table (JSON)", "forces": "forces and torques (CSV)"}
 
 
+# Wall time of the physics per second of video on a 2-core machine, one run at a time: the
+# lowest and highest clip of the benchmark (fast) and the paper preset's budget (--preset's
+# help has the figures per material). A clip at least LONG_CLIP_S long is told beforehand.
+PHYSICS_S_PER_S = {"fast": (10.0, 29.0), "paper": (43 * 60.0, 43 * 60.0)}
+LONG_CLIP_S = 30.0
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "reconstruct", help="video -> physically plausible 3d motion, report, overlay, exports",
@@ -290,20 +297,48 @@ def pipeline_config(args: argparse.Namespace) -> PipelineConfig:
     return config.without_cache() if args.no_cache else config
 
 
-def check_input(video: Path, config: PipelineConfig) -> tuple[int, int] | None:
+def check_input(video: Path, config: PipelineConfig
+                ) -> tuple[tuple[int, int] | None, float | None]:
     """Fail fast on a missing/unreadable video or keypoints file, or a time range outside the
-    video; returns the video's (width, height), None for a keypoints file."""
+    video; returns the video's (width, height) and the seconds of it to analyse, on the
+    footage's clock (None, None for a keypoints file)."""
     from physpose import video as videolib  # noqa: PLC0415
 
     if is_keypoints_file(video):
         if not video.is_file():
             raise PhysposeError("keypoints file not found", path=video, remedy="check the path")
         refuse_video_options(config.observe, video)
-        return None
+        return None, None
     info = videolib.probe(video)
     observe = config.footage_observe()
-    videolib.plan_frames(info, observe.target_fps, observe.start, observe.end)
-    return info.image_size
+    plan = videolib.plan_frames(info, observe.target_fps, observe.start, observe.end)
+    return info.image_size, len(plan.indices) / plan.fps
+
+
+def duration_note(seconds: float, preset: str, candidates: int = 1) -> str | None:
+    """What a long clip (or any clip under the paper preset) will cost in physics time,
+    before the work starts; seconds of video on the real clock."""
+    if preset == "fast" and seconds < LONG_CLIP_S:
+        return None
+    rate_low, rate_high = PHYSICS_S_PER_S[preset]
+    low, high = (candidates * rate * seconds / 60 for rate in (rate_low, rate_high))
+    rates = (f"{rate_low / 60:.0f} min" if rate_low == rate_high
+             else f"{rate_low:.0f}-{rate_high:.0f} s")
+    times = f" (x {candidates} for --candidates {candidates})" if candidates > 1 else ""
+    return (f"{seconds:.0f} s of video to reconstruct: the {preset} preset's physics took "
+            f"{rates} per second of video on a 2-core machine{times}, so about "
+            f"{_minutes(low, high)} there (less with more cores). An interrupted run resumes "
+            "where it stopped; --start and --end reconstruct a part")
+
+
+def _minutes(low: float, high: float) -> str:
+    """'30-87 min', '2.4 h', '50 min to 2.4 h' for a range of minutes."""
+    def text(m: float) -> tuple[str, str]:
+        return (f"{m:.0f}", "min") if m < 120 else (f"{m / 60:.1f}", "h")
+    (a, unit_a), (b, unit_b) = text(low), text(high)
+    if a == b and unit_a == unit_b:
+        return f"{a} {unit_a}"
+    return f"{a}-{b} {unit_b}" if unit_a == unit_b else f"{a} {unit_a} to {b} {unit_b}"
 
 
 def restarts_line(recon: Reconstruction) -> str:
@@ -386,7 +421,11 @@ def run(args: argparse.Namespace) -> int:
 
     formats = parse_formats(args.export)
     config = pipeline_config(args)
-    image_size = check_input(args.video, config)
+    image_size, seconds = check_input(args.video, config)
+    note = None if seconds is None else duration_note(seconds / config.slow_motion, args.preset,
+                                                       config.dynamics.candidates)
+    if note:
+        print(f"note: {note}", file=sys.stderr, flush=True)
     check_person(args.height, args.mass)
     check_output_folder(args.out)
     K = given_intrinsics(args.camera, args.camera_name, args.video, image_size)
