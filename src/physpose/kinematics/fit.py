@@ -151,7 +151,7 @@ class _Timer:
     @contextmanager
     def step(self, name: str) -> Iterator[None]:
         start = time.perf_counter()
-        bar = tqdm(desc=f"kinematics {name}", unit=" iterations", leave=False, file=sys.stderr,
+        bar = tqdm(desc=f"kinematics {name}", unit="it", leave=False, file=sys.stderr,
                    disable=not self.progress, dynamic_ncols=True)
         try:
             with reporting_iterations(bar.update):
