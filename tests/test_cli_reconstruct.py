@@ -187,8 +187,8 @@ def test_the_seconds_to_analyse_are_known_before_observing(clip):
 def test_a_long_clip_is_told_what_the_physics_will_cost_beforehand():
     assert duration_note(29.0, "fast") is None
     note = duration_note(180.0, "fast")
-    assert note.startswith("180 s of video") and "about 30-87 min" in note
-    assert "about 90 min to 4.3 h" in duration_note(180.0, "fast", candidates=3)
+    assert note.startswith("180 s of video") and "about 30-108 min" in note
+    assert "about 90 min to 5.4 h" in duration_note(180.0, "fast", candidates=3)
     # The paper preset costs 43 min per second of video: told for any clip.
     assert "about 86 min" in duration_note(2.0, "paper")
 

@@ -38,9 +38,9 @@ _OUTPUT_NAMES = {"metrics": "metrics", "report": "report (open in a browser)",
 
 
 # Wall time of the physics per second of video on a 2-core machine, one run at a time: the
-# lowest and highest clip of the benchmark (fast) and the paper preset's budget (--preset's
-# help has the figures per material). A clip at least LONG_CLIP_S long is told beforehand.
-PHYSICS_S_PER_S = {"fast": (10.0, 29.0), "paper": (43 * 60.0, 43 * 60.0)}
+# fastest and slowest clip of the shared material on the machines of stops 88-94 (fast), and
+# the paper preset's budget. A clip at least LONG_CLIP_S long is told beforehand.
+PHYSICS_S_PER_S = {"fast": (10.0, 36.0), "paper": (43 * 60.0, 43 * 60.0)}
 LONG_CLIP_S = 30.0
 
 
@@ -65,11 +65,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("video", type=Path, help="video file, or a keypoints .json/.npz")
     p.add_argument("--out", type=Path, required=True, metavar="DIR", help="output folder")
     p.add_argument("--preset", choices=tuple(PRESETS), default="fast",
-                   help="optimisation budget: fast (default; 13-29 s of dynamics per second "
-                        "of video over the motion-capture clips and 10-26 s over the real ones, "
-                        "measured one run at a time on a 2-core machine) or paper (2000 x 100 "
-                        "samples per 1 s window: about 19 min per window, 43 min per second of "
-                        "video, on the same machine)")
+                   help="optimisation budget: fast (default; {:.0f}-{:.0f} s of dynamics per "
+                        "second of video per clip of the shared material, measured one run at a "
+                        "time on 2-core machines) or paper (2000 x 100 samples per 1 s window: "
+                        "about 19 min per window, {:.0f} min per second of video, on such a "
+                        "machine)".format(*PHYSICS_S_PER_S["fast"],
+                                          PHYSICS_S_PER_S["paper"][0] / 60))
     p.add_argument("--candidates", type=int, metavar="N",
                    help="optimise the whole clip N times (seeds 0..N-1) and keep the run with "
                         "the lowest loss: N times the time (default 1)")
