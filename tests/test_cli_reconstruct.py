@@ -191,6 +191,8 @@ def test_a_long_clip_is_told_what_the_physics_will_cost_beforehand():
     assert "about 90 min to 5.4 h" in duration_note(180.0, "fast", candidates=3)
     # The paper preset costs 43 min per second of video: told for any clip.
     assert "about 86 min" in duration_note(2.0, "paper")
+    # --start/--end do not cut a keypoints file.
+    assert "--start" not in duration_note(60.0, "fast", keypoints=True)
 
 
 def test_export_formats():

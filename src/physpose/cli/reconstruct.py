@@ -316,9 +316,11 @@ def check_input(video: Path, config: PipelineConfig
     return info.image_size, len(plan.indices) / plan.fps
 
 
-def duration_note(seconds: float, preset: str, candidates: int = 1) -> str | None:
+def duration_note(seconds: float, preset: str, candidates: int = 1, *,
+                  keypoints: bool = False) -> str | None:
     """What a long clip (or any clip under the paper preset) will cost in physics time,
-    before the work starts; seconds of video on the real clock."""
+    before the work starts; seconds of video on the real clock. keypoints: the input is a
+    keypoints file, which --start/--end do not cut."""
     if preset == "fast" and seconds < LONG_CLIP_S:
         return None
     rate_low, rate_high = PHYSICS_S_PER_S[preset]
@@ -329,7 +331,16 @@ def duration_note(seconds: float, preset: str, candidates: int = 1) -> str | Non
     return (f"{seconds:.0f} s of video to reconstruct: the {preset} preset's physics took "
             f"{rates} per second of video on a 2-core machine{times}, so about "
             f"{_minutes(low, high)} there (less with more cores). An interrupted run resumes "
-            "where it stopped; --start and --end reconstruct a part")
+            "where it stopped; " + ("a keypoints file cut to a part reconstructs only that"
+                                    if keypoints else "--start and --end reconstruct a part"))
+
+
+def _tell_duration(footage_seconds: float, preset: str, config: PipelineConfig, *,
+                   keypoints: bool) -> None:
+    note = duration_note(footage_seconds / config.slow_motion, preset,
+                         config.dynamics.candidates, keypoints=keypoints)
+    if note:
+        print(f"note: {note}", file=sys.stderr, flush=True)
 
 
 def _minutes(low: float, high: float) -> str:
@@ -423,17 +434,17 @@ def run(args: argparse.Namespace) -> int:
     formats = parse_formats(args.export)
     config = pipeline_config(args)
     image_size, seconds = check_input(args.video, config)
-    note = None if seconds is None else duration_note(seconds / config.slow_motion, args.preset,
-                                                       config.dynamics.candidates)
-    if note:
-        print(f"note: {note}", file=sys.stderr, flush=True)
     check_person(args.height, args.mass)
     check_output_folder(args.out)
     K = given_intrinsics(args.camera, args.camera_name, args.video, image_size)
+    if seconds is not None:  # a video: before observing it, which takes minutes on a long one
+        _tell_duration(seconds, args.preset, config, keypoints=False)
     timings: dict[str, float] = {}
     clock = time.perf_counter()
     obs = load_input(args.video, config, K)
     timings["observe"] = time.perf_counter() - clock
+    if seconds is None:  # a keypoints file, as read
+        _tell_duration(obs.num_frames / obs.fps, args.preset, config, keypoints=True)
     recon = reconstruct(obs, args.out, config, height=args.height, mass=args.mass,
                         resume=args.resume and not args.no_cache, progress=True)
     timings.update({k: v for k, v in recon.meta.get("timings_s", {}).items()
