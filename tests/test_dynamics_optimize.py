@@ -4,6 +4,7 @@ and input checks."""
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
@@ -89,6 +90,19 @@ def test_result_shapes_and_records(clip):
                                body.total_mass * (acc[1:] + 9.81), atol=0.03 * weight)
     assert np.abs(res.grf[:, 2]).max() < 1e-9 and np.isfinite(res.cop).all()
     assert np.isfinite(res.torques).all() and np.abs(res.torques).max() > 1.0  # held upright
+
+
+def test_window_bars_say_the_time_left_once_two_windows_are_done(clip, capsys):
+    """A long clip has hundreds of windows: from the third on, each bar says the time left."""
+    body, fit, obs = clip
+    res = optimize_dynamics(body, fit, obs, TINY, checkpoints=False, progress=True)
+    err = capsys.readouterr().err
+    last = len(res.windows)
+    assert last >= 3
+    assert "dynamics window 1/" in err and "dynamics window 2/" in err
+    assert "left)" not in err.split(f"dynamics window 3/{last}")[0]
+    assert re.search(rf"dynamics window {last}/{last} \((under a minute|about .* min) left\)",
+                     err)
 
 
 def test_same_seed_same_result_and_another_seed_differs(clip):

@@ -68,3 +68,27 @@ def test_fit_recovers_coefficients_and_evaluate_batches():
     out = evaluate(basis, batch)
     assert out.shape == (2, 200, 48)
     np.testing.assert_allclose(out[1], 2 * values)
+
+
+@pytest.mark.parametrize("grid", GRIDS, ids=lambda g: f"h{g.spacing}-d{g.duration}")
+@pytest.mark.parametrize("derivative", [0, 1, 2])
+def test_the_sparse_basis_holds_the_same_values(grid, derivative):
+    t = np.linspace(0.0, grid.duration, 97)
+    dense = grid.basis(t, derivative=derivative)
+    sparse = grid.sparse_basis(t, derivative)
+    assert sparse.nnz <= 4 * len(t)
+    assert np.array_equal(sparse.toarray(), dense)
+
+
+def test_a_long_clip_gets_the_sparse_basis_and_the_same_fit(monkeypatch):
+    """Over minutes of steps the dense basis took gigabytes; clips of ordinary length keep it
+    (and their digits)."""
+    grid = KnotGrid(0.1, 3.0)
+    t = np.arange(0.0, 3.0, 0.005)
+    assert isinstance(grid.matrix(t), np.ndarray)
+    monkeypatch.setattr("physpose.dynamics.spline.DENSE_ENTRIES", len(t) * grid.num_coefs - 1)
+    sparse = grid.matrix(t)
+    assert not isinstance(sparse, np.ndarray)
+    values = np.stack([np.sin(3 * t), t ** 2], axis=1)
+    np.testing.assert_allclose(fit_coefficients(sparse, values, ridge=1e-3),
+                               fit_coefficients(grid.basis(t), values, ridge=1e-3), atol=1e-10)

@@ -111,12 +111,12 @@ def smooth_reference(qpos: np.ndarray, fps: float, dt: float, num_steps: int,
     t_frames = np.arange(len(values)) / fps
     t_steps = np.arange(num_steps + 1) * dt + shift
     grid = KnotGrid(knot_spacing, max(t_frames[-1], t_steps[-1]))
-    basis = grid.basis(t_frames)
+    basis = grid.matrix(t_frames)
     # Coefficients no frame constrains (a clip shorter than a few knots) rest on the nearest
     # frame's value rather than zero.
     nearest = values[np.clip(np.round(grid.centres() * fps).astype(int), 0, len(values) - 1)]
     coefs = fit_coefficients(basis, values, ridge=1e-3, prior=nearest)
-    pos, vel, acc = (grid.basis(t_steps, derivative=d) @ coefs for d in (0, 1, 2))
+    pos, vel, acc = (grid.matrix(t_steps, derivative=d) @ coefs for d in (0, 1, 2))
     rot, drot, ddrot = pos[:, 3:7], vel[:, 3:7], acc[:, 3:7]
     norm = np.linalg.norm(rot, axis=-1, keepdims=True)
     unit = rot / norm
@@ -265,7 +265,7 @@ def initial_coefficients(grid: KnotGrid, step_times: np.ndarray, targets: np.nda
     clipped = np.clip(targets, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])
     nearest = clipped[np.clip(np.round(grid.centres() / (step_times[1] - step_times[0])
                                        ).astype(int), 0, len(clipped) - 1)]
-    coefs = fit_coefficients(grid.basis(step_times), clipped, ridge=1e-3, prior=nearest)
+    coefs = fit_coefficients(grid.matrix(step_times), clipped, ridge=1e-3, prior=nearest)
     return np.clip(coefs, DOF_LIMITS[:, 0], DOF_LIMITS[:, 1])
 
 

@@ -416,6 +416,27 @@ def _cut_window(win: Window, arrays: dict, restart: Window) -> dict:
                 **{k: arrays[k][:kept] for k in _OUTPUT_KEYS})
 
 
+class _Pace:
+    """The time left, from the mean seconds of the windows this run optimised (a long clip has
+    hundreds of windows, each with its own bar)."""
+
+    def __init__(self) -> None:
+        self.seconds, self.windows = 0.0, 0
+
+    def add(self, seconds: float, windows: int = 1) -> None:
+        self.seconds, self.windows = self.seconds + seconds, self.windows + windows
+
+    def left(self, windows: int) -> str:
+        """' (about 1 h 31 min left)' for that many windows to go, or '' before two are done."""
+        if self.windows < 2 or windows < 1:
+            return ""
+        minutes = round(self.seconds / self.windows * windows / 60)
+        if minutes < 1:
+            return " (under a minute left)"
+        hours, minutes = divmod(minutes, 60)
+        return f" (about {f'{hours} h ' if hours else ''}{minutes} min left)"
+
+
 def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, folder: Path | None,
                     progress: bool, timing: dict) -> tuple[dict, dict, list[dict]]:
     wins = list(setup.windows)  # a window that strays is cut short: the plan changes
@@ -425,6 +446,7 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
     step_parts: dict[str, list[np.ndarray]] = {k: [] for k in _STEP_OUTPUT_KEYS}
     records = []
     reset = False
+    pace = _Pace()
     w = 0
     while w < len(wins):
         win = wins[w]
@@ -436,7 +458,7 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             start = time.perf_counter()
             joints_so_far = np.concatenate(parts["joints"]) if parts["joints"] else np.zeros((0,))
             history = joints_so_far[max(0, win.first - 2):win.first] if continued else None
-            label = f"dynamics window {w + 1}/{len(wins)}"
+            label = f"dynamics window {w + 1}/{len(wins)}{pace.left(len(wins) - w)}"
             problem = _problem(setup, win, coefs, state, continued, history, cfg)
             problem, best, initial, evaluations = _search_with_retries(
                 problem, simulator, setup, cfg, timing, w, step_end, label, progress)
@@ -462,6 +484,7 @@ def _run_sequential(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig, fo
             next_state = best.states[step_end - win.start_step]
             record = _record(win, best, initial, evaluations, time.perf_counter() - start,
                              cfg.weights)
+            pace.add(record["seconds"])
             if restarted:  # what the search from the state handed over found, kept
                 record.update(restarted=True, continued=continued_log)
             arrays = {"coefs": coefs, "next_state": next_state, **steps, **out}
@@ -512,13 +535,15 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
     results = [None if r is None else (_with_forces(r[0]), dict(r[1], resumed=True))
                for r in results]
     todo = [w for w in range(len(wins)) if results[w] is None]
+    pace = _Pace()
     for g in range(0, len(todo), cfg.parallel_windows):
         group = todo[g:g + cfg.parallel_windows]
         start = time.perf_counter()
         problems = [_problem(setup, wins[w], setup.coefs0,
                              _kinematic_state(setup, wins[w].start_step, cfg.ground_snap),
                              False, None, cfg) for w in group]
-        label = f"dynamics windows {group[0] + 1}-{group[-1] + 1}/{len(wins)}"
+        label = (f"dynamics windows {group[0] + 1}-{group[-1] + 1}/{len(wins)}"
+                 f"{pace.left(len(todo) - g)}")
         searched, bests, initials, counts = search_averaged(
             problems, simulator, setup.objective, cfg, timing,
             [window_seed(cfg.seed, w) for w in group], label, progress)
@@ -527,6 +552,7 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
                 bests[i], initials[i] = _refine(setup, searched[i], bests[i], initials[i],
                                                 simulator, cfg, timing)
         seconds = (time.perf_counter() - start) / len(group)
+        pace.add(seconds * len(group), len(group))
         for i, w in enumerate(group):
             win, best = wins[w], bests[i]
             out = _frame_outputs(setup, best, win, win.frames)
