@@ -92,3 +92,5 @@ def test_a_long_clip_gets_the_sparse_basis_and_the_same_fit(monkeypatch):
     values = np.stack([np.sin(3 * t), t ** 2], axis=1)
     np.testing.assert_allclose(fit_coefficients(sparse, values, ridge=1e-3),
                                fit_coefficients(grid.basis(t), values, ridge=1e-3), atol=1e-10)
+    one = fit_coefficients(sparse, values[:, :1], ridge=1e-3)  # one column stays a column
+    assert one.shape == (grid.num_coefs, 1)

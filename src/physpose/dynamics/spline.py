@@ -128,7 +128,8 @@ def fit_coefficients(basis: np.ndarray, values: np.ndarray, ridge: float = 1e-6,
     prior = np.zeros((k, values.shape[1])) if prior is None else np.asarray(prior, dtype=float)
     if scipy.sparse.issparse(basis):
         lhs = (basis.T @ basis + ridge * scipy.sparse.identity(k)).tocsc()
-        return scipy.sparse.linalg.spsolve(lhs, basis.T @ values + ridge * prior)
+        # spsolve returns a 1-d array for a single right-hand side: keep (K, D).
+        return scipy.sparse.linalg.spsolve(lhs, basis.T @ values + ridge * prior).reshape(k, -1)
     basis = np.asarray(basis, dtype=float)
     lhs = basis.T @ basis + ridge * np.eye(k)
     rhs = basis.T @ values + ridge * prior
