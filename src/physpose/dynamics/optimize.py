@@ -551,8 +551,9 @@ def _run_independent(setup: _Setup, simulator: Simulator, cfg: DynamicsConfig,
             for i in range(len(group)):
                 bests[i], initials[i] = _refine(setup, searched[i], bests[i], initials[i],
                                                 simulator, cfg, timing)
-        seconds = (time.perf_counter() - start) / len(group)
-        pace.add(seconds * len(group), len(group))
+        elapsed = time.perf_counter() - start
+        pace.add(elapsed, len(group))
+        seconds = elapsed / len(group)
         for i, w in enumerate(group):
             win, best = wins[w], bests[i]
             out = _frame_outputs(setup, best, win, win.frames)
