@@ -13,6 +13,7 @@ from physpose.errors import PhysposeError
 from physpose.fk import fk_qpos
 from physpose.kinematics import KinematicConfig, fit_kinematics
 from physpose.kinematics.config import VARIANT_NAMES, GroundConfig, PoseConfig
+from physpose.kinematics import fit as fit_module
 from physpose.kinematics.fit import fit_variants
 from physpose.joints import LANDMARK_INDEX
 from physpose.metrics import foot_points, transform_points
@@ -195,6 +196,34 @@ def test_cache_returns_the_same_fit(perfect, tmp_path, monkeypatch):
     assert np.array_equal(first.qpos, second.qpos) and first.shape == second.shape
     other = fit_kinematics(perfect.observations, cfg, height=1.6)  # a new key, a new fit
     assert abs(other.shape.height - 1.6) < 1e-6
+
+
+def test_a_fit_stopped_midway_resumes_after_its_finished_steps(perfect, tmp_path, monkeypatch):
+    """Ctrl-C in the ground-plane step of a long clip's fit used to lose the minutes of the
+    steps before it: they are kept, read back, and the resumed fit is the unbroken one."""
+    monkeypatch.setenv("PHYSPOSE_CACHE_DIR", str(tmp_path))
+    cfg = KinematicConfig.preset("SO+GT")
+    unbroken = fit_kinematics(perfect.observations, dataclasses.replace(cfg, use_cache=False))
+    estimate_ground = fit_module._estimate_ground
+
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fit_module, "_estimate_ground", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        fit_kinematics(perfect.observations, cfg)
+    steps = tmp_path / "kinematics_steps"
+    assert len(list(steps.glob("*.npz"))) == 3  # init, pose, temporal
+    monkeypatch.setattr(fit_module, "_estimate_ground", estimate_ground)
+    logged: list[str] = []
+    resumed = fit_kinematics(perfect.observations, cfg, log=logged.append)
+    for step in ("init", "pose", "temporal"):
+        assert f"{step}: finished by an earlier run, read back" in logged, step
+    assert not any("ground_pose: finished" in line for line in logged)
+    assert np.array_equal(resumed.qpos, unbroken.qpos)
+    assert np.array_equal(resumed.T_world2cam, unbroken.T_world2cam)
+    assert resumed.losses == unbroken.losses
+    assert not list(steps.glob("*.npz"))  # the whole fit is cached now
 
 
 def test_bad_input_is_reported(perfect):

@@ -36,6 +36,7 @@ from physpose.errors import expect_type
 from physpose.paths import cache_dir
 from physpose.fk import fk_qpos, segment_frames
 from physpose.kinematics import camera as cam
+from physpose.kinematics.checkpoint import FitCheckpoints
 from physpose.kinematics.config import VARIANT_NAMES, KinematicConfig
 from physpose.kinematics.evidence import Evidence, gather_evidence, padded_length
 from physpose.kinematics.ground import estimate_plane, level_plane
@@ -82,8 +83,9 @@ def fit_kinematics(observations: Observations, config: KinematicConfig = Kinemat
 
     height (m) fixes the body's scale, mass (kg) its mass (else from the stature at BMI 22);
     camera_K (3, 3) overrides the observations' intrinsics. Results are cached by observations,
-    config and these arguments (config.use_cache). log: each step's duration; progress: a bar
-    on stderr per step, counting its iterations.
+    config and these arguments (config.use_cache); so are its finished steps until the whole
+    fit is, so a fit stopped midway resumes after them (kinematics.checkpoint). log: each
+    step's duration; progress: a bar on stderr per step, counting its iterations.
     """
     expect_type(observations, Observations, "fit_kinematics' observations",
                 "pass Observations, e.g. physpose.pipeline.load_observations(path, "
@@ -102,10 +104,12 @@ def fit_kinematics(observations: Observations, config: KinematicConfig = Kinemat
         log("cached result")
         fit = _from_arrays(hit)
     else:
+        steps = FitCheckpoints(key if config.use_cache else None, log)
         fit = fit_variants(observations, (config.variant,), config, height=height, mass=mass,
-                           camera_K=K, log=log, progress=progress)[config.variant]
-        if config.use_cache:
-            cache.put(key, _to_arrays(fit))
+                           camera_K=K, log=log, progress=progress,
+                           checkpoints=steps)[config.variant]
+        if config.use_cache and cache.put(key, _to_arrays(fit)) is not None:
+            steps.clear()
     message = diagnostics.label_exchange_message(fit.label_exchanges, fit.fps)
     if message:  # given again for a cached fit
         _log.warning(message)
@@ -163,8 +167,8 @@ class _Timer:
         self.log(f"{name} done in {seconds:.1f} s")
 
 
-def _prepare(obs: Observations, cfg: KinematicConfig, height, mass, K_given, timer: _Timer
-             ) -> _Context:
+def _prepare(obs: Observations, cfg: KinematicConfig, height, mass, K_given, timer: _Timer,
+             steps: FitCheckpoints) -> _Context:
     """Evidence, camera, shape (+S) and the initial poses of every frame (variant S)."""
     with timer.step("evidence"):
         focal_prior = cam.focal_from_fov(obs.image_size, cfg.camera.diagonal_fov_deg)
@@ -196,11 +200,15 @@ def _prepare(obs: Observations, cfg: KinematicConfig, height, mass, K_given, tim
                                surface.offset, height, settings, np.zeros(4),
                                cfg.pose.hard_limits)
         w = cfg.pose.weights
-        params, _ = problem.run(params, ("root_rotvec", "angles"), weight_dict(
-            world_landmarks=w.world_landmarks, pose_prior=w.pose_prior,
-            joint_limits=w.joint_limits), cfg.pose.init_iterations)
-        params, _ = problem.run(params, ("root_pos",), weight_dict(reprojection=w.reprojection),
-                                cfg.pose.init_iterations)
+
+        def init() -> tuple[Params, dict]:
+            p, _ = problem.run(params, ("root_rotvec", "angles"), weight_dict(
+                world_landmarks=w.world_landmarks, pose_prior=w.pose_prior,
+                joint_limits=w.joint_limits), cfg.pose.init_iterations)
+            return problem.run(p, ("root_pos",), weight_dict(reprojection=w.reprojection),
+                               cfg.pose.init_iterations)
+
+        params, _ = steps.params("init", init)
         ctx = _Context(obs=obs, cfg=cfg, ev=ev, K=K, focal_prior=focal_prior,
                        K_given=K_given is not None, shape=shape, surface=surface,
                        height=height, params=params, problem=problem, timings=timer.timings,
@@ -228,19 +236,22 @@ def _pose_terms(cfg: KinematicConfig, temporal: bool, ground: bool, focal: bool)
 def fit_variants(obs: Observations, variants: tuple[str, ...], cfg: KinematicConfig, *,
                  height: float | None = None, mass: float | None = None,
                  camera_K: np.ndarray | None = None, log: Log = _quiet,
-                 progress: bool = False) -> dict[str, KinematicFit]:
+                 progress: bool = False, checkpoints: FitCheckpoints | None = None
+                 ) -> dict[str, KinematicFit]:
     """Several variants of one clip sharing their common steps (S -> SO -> SO+T; the plane of
     SO+G from SO's poses, of SO+GT from SO+T's). `cfg`'s variant flags are ignored; its other
-    settings apply to all. No caching (see fit_kinematics). progress: a bar on stderr per
-    step, counting its iterations."""
+    settings apply to all. No caching (see fit_kinematics); checkpoints, if given, keeps and
+    reads back each finished step. progress: a bar on stderr per step, counting its
+    iterations."""
     for v in variants:
         KinematicConfig.preset(v)  # unknown names fail early
     K = camera_K if camera_K is not None else obs.camera_K
     timer = _Timer(log, progress)
+    steps = checkpoints if checkpoints is not None else FitCheckpoints(None)
     if cfg.compile_cache:
         enable_compilation_cache()
     with double_precision():
-        ctx = _prepare(obs, cfg, height, mass, K, timer)
+        ctx = _prepare(obs, cfg, height, mass, K, timer, steps)
         focal = not ctx.K_given and cfg.camera.refine_focal
         free = ("root_pos", "root_rotvec", "angles", "log_depth_scale")
         free += ("log_focal",) if focal else ()
@@ -249,31 +260,32 @@ def fit_variants(obs: Observations, variants: tuple[str, ...], cfg: KinematicCon
         wanted = set(variants)
         if wanted - {"S"}:
             with timer.step("pose"):
-                p, losses = ctx.problem.run(ctx.params, free,
-                                            _pose_terms(cfg, False, False, focal),
-                                            cfg.pose.iterations)
+                p, losses = steps.params("pose", lambda: ctx.problem.run(
+                    ctx.params, free, _pose_terms(cfg, False, False, focal),
+                    cfg.pose.iterations))
                 stages["SO"] = (p, ctx.problem_at(p), losses)
         if wanted & {"SO+T", "SO+GT"}:
             with timer.step("temporal"):
                 p, problem, _ = stages["SO"]
-                p, losses = problem.run(p, free, _pose_terms(cfg, True, False, focal),
-                                        cfg.pose.iterations)
+                p, losses = steps.params("temporal", lambda: problem.run(
+                    p, free, _pose_terms(cfg, True, False, focal), cfg.pose.iterations))
                 stages["SO+T"] = (p, ctx.problem_at(p), losses)
         for name, base, temporal in (("SO+G", "SO", False), ("SO+GT", "SO+T", True)):
             if name not in wanted:
                 continue
             p, problem, _ = stages[base]
-            for _ in range(cfg.ground_plane.rounds):
+            for r in range(cfg.ground_plane.rounds):
                 with timer.step("ground_plane"):
-                    plane = _estimate_ground(ctx, p, problem)
+                    plane = steps.plane(f"{name} ground_plane {r}",
+                                        lambda: _estimate_ground(ctx, p, problem))
                 with timer.step("ground_pose"):
                     problem = ctx.problem_at(p, plane)
-                    p, losses = problem.run(p, free, _pose_terms(cfg, temporal, True, focal),
-                                            cfg.pose.iterations)
+                    p, losses = steps.params(f"{name} ground_pose {r}", lambda: problem.run(
+                        p, free, _pose_terms(cfg, temporal, True, focal), cfg.pose.iterations))
             if cfg.ground_plane.raised_supports:
                 p, problem, losses = _stand_on_supports(
                     ctx, p, problem, losses, _pose_terms(cfg, temporal, True, focal), free,
-                    timer)
+                    timer, steps, f"{name} support_pose")
             stages[name] = (p, problem, losses)
         for v in variants:
             p, problem, losses = stages[v]
@@ -296,8 +308,8 @@ def _estimate_ground(ctx: _Context, params: Params, problem: Problem) -> np.ndar
 
 
 def _stand_on_supports(ctx: _Context, params: Params, problem: Problem, losses: dict,
-                       terms: dict, free: tuple[str, ...], timer: _Timer
-                       ) -> tuple[Params, Problem, dict]:
+                       terms: dict, free: tuple[str, ...], timer: _Timer,
+                       steps: FitCheckpoints, step: str) -> tuple[Params, Problem, dict]:
     """Where the fitted feet stay raised above the floor for a while (diagnostics.raised_runs:
     the person stands on a box, a step), the poses again (all frames) with the ground and
     skate terms standing the feet on that support's top (supports.support_heights; the fit's
@@ -312,7 +324,8 @@ def _stand_on_supports(ctx: _Context, params: Params, problem: Problem, losses: 
         return params, problem, losses
     with timer.step("support_pose"):
         problem = ctx.problem_at(params, plane, heights)
-        params, losses = problem.run(params, free, terms, ctx.cfg.pose.iterations)
+        params, losses = steps.params(step, lambda: problem.run(
+            params, free, terms, ctx.cfg.pose.iterations))
     return params, problem, losses
 
 
