@@ -118,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         # On a line of its own: a progress bar may have the cursor.
         print(f"\nphyspose {args.command}: interrupted. Run the same command again to resume: "
-              "the stages and physics windows finished so far are kept", file=sys.stderr)
+              "the stages, kinematic-fit steps and physics windows finished so far are kept",
+              file=sys.stderr)
         return 130
 
 
