@@ -29,7 +29,7 @@ class FitCheckpoints:
     def __init__(self, key: str | None, log: Callable[[str], None] = lambda _: None):
         self.key, self.log = key, log
         self.cache = Cache(STAGE)
-        self.written: list[str] = []
+        self.kept: list[str] = []  # steps of this fit in the cache, written or read back
 
     def _entry(self, step: str) -> str:
         return hashlib.sha256(f"{self.key}/{step}".encode()).hexdigest()
@@ -56,9 +56,9 @@ class FitCheckpoints:
         return plane
 
     def clear(self) -> None:
-        """Delete the steps this fit wrote or read (its whole result is cached by now)."""
+        """Delete the kept steps (the whole fit is cached by now)."""
         if self.key is not None:
-            for step in self.written:
+            for step in self.kept:
                 self.cache.path(self._entry(step)).unlink(missing_ok=True)
 
     def _read(self, step: str) -> dict[str, np.ndarray] | None:
@@ -66,10 +66,10 @@ class FitCheckpoints:
             return None
         arrays = self.cache.get(self._entry(step))
         if arrays is not None:
-            self.written.append(step)
+            self.kept.append(step)
             self.log(f"{step}: finished by an earlier run, read back")
         return arrays
 
     def _write(self, step: str, arrays: dict[str, np.ndarray]) -> None:
         if self.key is not None and self.cache.put(self._entry(step), arrays) is not None:
-            self.written.append(step)
+            self.kept.append(step)
