@@ -56,10 +56,9 @@ class FitCheckpoints:
         return plane
 
     def clear(self) -> None:
-        """Delete the kept steps (the whole fit is cached by now)."""
-        if self.key is not None:
-            for step in self.kept:
-                self.cache.path(self._entry(step)).unlink(missing_ok=True)
+        """Delete the kept steps (the whole fit is cached by now; with key None there are none)."""
+        for step in self.kept:
+            self.cache.path(self._entry(step)).unlink(missing_ok=True)
 
     def _read(self, step: str) -> dict[str, np.ndarray] | None:
         if self.key is None:
