@@ -46,15 +46,27 @@ def rot_z(deg: float) -> np.ndarray:
 def test_sliding_foot_in_contact_skates_every_frame():
     slide = motion(np.outer(np.arange(10), [0.03, 0, 0]))   # 3 cm per frame, feet on the floor
     assert m.foot_contacts(slide).all()
-    assert m.foot_skate(slide) == 100.0
+    assert m.foot_skate(slide, fps=25.0) == 100.0
     slow = motion(np.outer(np.arange(10), [0.015, 0, 0]))   # 1.5 cm per frame: below 2 cm
-    assert m.foot_skate(slow) == 0.0
+    assert m.foot_skate(slow, fps=25.0) == 0.0
+
+
+def test_skate_reads_a_speed_so_the_frame_rate_does_not_change_it():
+    """0.4 m/s is under the paper's 2 cm per frame at 25 fps (0.5 m/s); filmed at 12.5 fps the
+    same slide moves 3.2 cm between frames and still does not skate, and 0.6 m/s skates at
+    every rate."""
+    for fps in (12.5, 25.0, 60.0):
+        step = np.outer(np.arange(10), [1.0 / fps, 0, 0])
+        assert m.foot_skate(motion(0.4 * step), fps=fps) == 0.0
+        assert m.foot_skate(motion(0.6 * step), fps=fps) == 100.0
+    with pytest.raises(ValueError, match="frame rate"):
+        m.foot_skate(motion(0.4 * step), fps=0.0)
 
 
 def test_foot_in_the_air_does_not_skate():
     lifted = motion(np.outer(np.arange(10), [0.05, 0, 0]) + [0, 0, 0.10])
     assert not m.foot_contacts(lifted).any()
-    assert m.foot_skate(lifted) == 0.0
+    assert m.foot_skate(lifted, fps=25.0) == 0.0
 
 
 def test_foot_rolling_over_its_toe_is_not_skate():
@@ -64,7 +76,7 @@ def test_foot_rolling_over_its_toe_is_not_skate():
         heel = JOINT_INDEX["l_heel"]
         pose[heel] += (0.03 * k, 0.0, 0.0)
         frames.append(pose)
-    assert m.foot_skate(np.stack(frames)) == 0.0
+    assert m.foot_skate(np.stack(frames), fps=25.0) == 0.0
 
 
 def test_hovering_foot_floats():

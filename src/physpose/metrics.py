@@ -16,7 +16,8 @@ import numpy as np
 from physpose.errors import PhysposeError
 from physpose.joints import JOINT_NAMES
 
-SKATE_DISTANCE = 0.02  # m, a foot in contact moving further than this between frames skates
+SKATE_DISTANCE = 0.02  # m, a foot in contact moving further than this between frames skates ...
+SKATE_RATE = 25.0  # Hz, ... at the paper's frame rate; at f Hz the distance is 0.02 x 25 / f m
 FLOAT_DISTANCE = 0.02  # m, a foot out of contact but lower than this floats
 FALL_RATIO = 0.5  # a head lower than this fraction of the reference's head height has fallen ...
 FALL_MARGIN = 0.2  # m, ... if it is also at least this much (about a head's height) lower
@@ -200,20 +201,25 @@ def foot_contacts(joints: np.ndarray, cfg: ContactConfig = KINEMATIC_CONTACT,
 
 
 def foot_skate(joints: np.ndarray, cfg: ContactConfig = KINEMATIC_CONTACT,
-               joint_names=JOINT_NAMES) -> float:
-    """% of frame pairs in which a foot in contact (both frames) slides > SKATE_DISTANCE; NaN
-    for a single frame (no pair).
+               joint_names=JOINT_NAMES, *, fps: float) -> float:
+    """% of frame pairs in which a foot in contact (both frames) slides; NaN for a single frame
+    (no pair).
 
-    A foot slides when both its heel and its toe move further than that horizontally (a foot
-    rolling over its heel or toe keeps one of them planted).
+    A foot slides when both its heel and its toe move horizontally further than
+    SKATE_DISTANCE per frame at SKATE_RATE (0.5 m/s, the paper's 2 cm at its 25 fps; scaled
+    with the rate, so that a motion skates as often at any frame rate); a foot rolling over its
+    heel or toe keeps one of them planted.
     """
+    if not (np.isfinite(fps) and fps > 0):
+        raise ValueError(f"frame rate {fps} must be positive")
+    limit = SKATE_DISTANCE * (SKATE_RATE / fps)  # exactly SKATE_DISTANCE at SKATE_RATE
     contact = foot_contacts(joints, cfg, joint_names)
     both = contact[1:] & contact[:-1]
     moved = []
     for s in SIDES:
         step = [np.linalg.norm(np.diff(joints[:, _index(joint_names, f"{s}_{p}"), :2], axis=0),
                                axis=-1) for p in ("heel", "toe")]
-        moved.append(np.minimum(*step) > SKATE_DISTANCE)
+        moved.append(np.minimum(*step) > limit)
     skating = (both & np.stack(moved, axis=1)).any(axis=1)
     return 100.0 * _mean(skating)
 
@@ -289,7 +295,7 @@ def evaluate(est: np.ndarray, gt: np.ndarray | None = None, *, fps: float,
     if est_2d is not None and target_2d is not None:
         out["mpjpe_2d_px"] = mpjpe_2d(est_2d, target_2d, confidence_2d)
     pen_mean, pen_max = ground_penetration(est, contact, joint_names)
-    out.update(foot_skate_pct=foot_skate(est, contact, joint_names),
+    out.update(foot_skate_pct=foot_skate(est, contact, joint_names, fps=fps),
                float_pct=foot_float(est, contact, joint_names),
                penetration_mean_mm=pen_mean, penetration_max_mm=pen_max,
                jitter_mps2=jitter(est, fps))
