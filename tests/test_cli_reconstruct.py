@@ -129,7 +129,7 @@ def test_flags_make_the_pipeline_config():
     assert len(cfg.scene.obstacles) == 2
     assert cfg.scene.obstacles[0].yaw == pytest.approx(np.radians(30))
     default = pipeline_config(_args("v.mp4", "--out", "o"))
-    assert default.scene.obstacles == () and default.scene.ground_solref == (0.02, 1.0)
+    assert default.scene.obstacles == () and default.scene.ground_solref == (0.01, 1.0)
     assert default.observe.use_cache and default.kinematics.use_cache
     fresh = pipeline_config(_args("v.mp4", "--out", "o", "--no-cache"))
     assert not (fresh.observe.use_cache or fresh.kinematics.use_cache)
