@@ -78,8 +78,8 @@ class SceneConfig:
     ground_friction: float = DEFAULT_FRICTION
     # 0.01 s: two of the body's 5 ms steps, the hardest floor MuJoCo keeps stable (it clamps a
     # shorter time constant to that). Stop 96: on 0.02 s the feet sank 2-6 mm on average and
-    # up to 3 cm on landings and slid there; at 0.01 s every real clip's feet slid in under 5 %
-    # of frame pairs under two seeds, motion capture's image error fell 2 px (docs/dynamics.md).
+    # up to 3 cm on landings and slid there; at 0.01 s they slid less on the real clips that
+    # skated most and motion capture's image error fell 2 px (docs/dynamics.md, Measured).
     ground_solref: tuple[float, float] = (0.01, 1.0)
     ground_solimp: tuple[float, float, float, float, float] = _HARD_SOLIMP
     obstacles: tuple[Box, ...] = ()
