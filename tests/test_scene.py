@@ -84,6 +84,10 @@ def test_ground_stiffness_damping_forms_agree():
     default = SceneConfig()
     k, d = default.ground_stiffness_damping()
     assert d == pytest.approx(2 * math.sqrt(k), rel=0.06)  # dampratio 1 (dmax close to 1)
+    # --ground-stiffness's help names these: the default floor and the earlier, softer one
+    assert k == pytest.approx(1e4)
+    assert SceneConfig(ground_solref=(0.02, 1.0)).ground_stiffness_damping()[0] == \
+        pytest.approx(2500)
     direct = default.with_ground(stiffness=k, damping=d)
     assert direct.ground_stiffness_damping() == pytest.approx((k, d))
     with pytest.raises(PhysposeError, match="stiffness"):

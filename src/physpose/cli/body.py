@@ -31,7 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                                          "(default 0.9)")
     p.add_argument("--ground-stiffness", type=float,
                    help="ground stiffness, MuJoCo direct solref units (1/s^2 per unit mass); "
-                        "default: a hard floor")
+                        "default 10000, the hardest floor stable at the body's 5 ms step")
     p.add_argument("--ground-damping", type=float,
                    help="ground damping, MuJoCo direct solref units (1/s); default: "
                         "critical for the stiffness")
